@@ -1,0 +1,125 @@
+"""Reward terms of the paper (SPEC §3), each with its own weight.
+
+Base terms: ``goal`` (+weight for a goal scored, -weight for one conceded) and
+``out_of_table`` (-weight when the ball leaves the table upwards). Shaping terms, off at weight
+0: ``ball_to_goal`` and ``figurine_to_ball`` are potentials Φ(s) rewarded either as the
+authors' per-step difference ``w·(Φ(s') - Φ(s))`` or as potential-based shaping
+``w·(γ·Φ(s') - Φ(s))`` (with Φ = 0 at the end of an episode, so the optimal policy is
+unchanged); ``action_regularisation`` is ``-w·mean((a_t - a_{t-1})²)`` every step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from foosball_gym import table as T
+
+SHAPING_MODES = ("difference", "potential")
+TERMS = ("goal", "out_of_table", "ball_to_goal", "figurine_to_ball", "action_regularisation")
+_GOAL_MOUTH_HALF = T.GOAL_HALF_WIDTH - T.BALL_RADIUS
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    goal: float = 1000.0
+    out_of_table: float = 1000.0
+    ball_to_goal: float = 0.0
+    figurine_to_ball: float = 0.0
+    action_regularisation: float = 0.0
+    shaping: str = "difference"
+    gamma: float = 0.99
+
+    def __post_init__(self) -> None:
+        if self.shaping not in SHAPING_MODES:
+            raise ValueError(
+                f"unknown shaping {self.shaping!r}; allowed: {', '.join(SHAPING_MODES)}"
+            )
+        for name in TERMS:
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ValueError(f"reward weight {name} must be a finite number, got {value!r}")
+        if not 0.0 <= self.gamma <= 1.0:
+            raise ValueError(f"gamma must lie in [0, 1], got {self.gamma}")
+
+
+def ball_to_goal_potential(x: float, y: float) -> float:
+    """exp(-6 d), d the distance from the ball to the away goal mouth (home attacks +x)."""
+    dy = abs(y) - _GOAL_MOUTH_HALF
+    d = math.hypot(x - T.GOAL_LINE_X, dy if dy > 0 else 0.0)
+    return math.exp(-6.0 * d)
+
+
+def figurine_to_ball_potential(ball_y: float, figurine_y: Sequence[Sequence[float]]) -> float:
+    """-(1 - mean over rods of exp(-6 · min over the rod's figurines |y_fig - y_ball|))."""
+    total = 0.0
+    for ys in figurine_y:
+        total += math.exp(-6.0 * min(abs(fy - ball_y) for fy in ys))
+    return -(1.0 - total / len(figurine_y))
+
+
+class RewardComputer:
+    """Keeps the previous potentials and action; returns the terms of each step.
+
+    Args:
+        weights: the term weights.
+        rods: the controlled rods (for figurine-to-ball).
+    """
+
+    def __init__(self, weights: RewardWeights, rods: Sequence[T.Rod]) -> None:
+        self.w = weights
+        self.rods = tuple(rods)
+        self._phi_goal = 0.0
+        self._phi_fig = 0.0
+        self._last_action: list[float] | None = None
+        self._potential = weights.shaping == "potential"
+
+    def _potentials(
+        self, slide: Sequence[float], ball_x: float, ball_y: float
+    ) -> tuple[float, float]:
+        w = self.w
+        phi_goal = ball_to_goal_potential(ball_x, ball_y) if w.ball_to_goal else 0.0
+        if w.figurine_to_ball and self.rods:
+            phi_fig = figurine_to_ball_potential(
+                ball_y, [rod.figurine_y(s) for rod, s in zip(self.rods, slide)]
+            )
+        else:
+            phi_fig = 0.0
+        return phi_goal, phi_fig
+
+    def reset(self, slide: Sequence[float], ball_x: float, ball_y: float, n_actions: int) -> None:
+        """Start an episode from a state; ``slide`` holds the controlled rods' slide values."""
+        self._phi_goal, self._phi_fig = self._potentials(slide, ball_x, ball_y)
+        self._last_action = [0.0] * n_actions
+
+    def step(
+        self,
+        goal: int,
+        out_of_table: bool,
+        slide: Sequence[float],
+        ball_x: float,
+        ball_y: float,
+        action: Sequence[float],
+        terminal: bool,
+    ) -> dict[str, float]:
+        """Reward terms for one step, keyed by term name (their sum is the reward)."""
+        w = self.w
+        phi_goal, phi_fig = (
+            (0.0, 0.0) if terminal and self._potential else self._potentials(slide, ball_x, ball_y)
+        )
+        g = w.gamma if self._potential else 1.0
+        terms = {
+            "goal": w.goal * goal,
+            "out_of_table": -w.out_of_table if out_of_table else 0.0,
+            "ball_to_goal": w.ball_to_goal * (g * phi_goal - self._phi_goal),
+            "figurine_to_ball": w.figurine_to_ball * (g * phi_fig - self._phi_fig),
+            "action_regularisation": 0.0,
+        }
+        if w.action_regularisation:
+            last = self._last_action
+            diff = sum((a - b) ** 2 for a, b in zip(action, last)) / max(len(action), 1)
+            terms["action_regularisation"] = -w.action_regularisation * diff
+        self._last_action = list(action)
+        self._phi_goal, self._phi_fig = phi_goal, phi_fig
+        return terms
