@@ -1,0 +1,143 @@
+"""The table URDF: what it holds matches the spec, it is up to date and it ships in the wheel."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+import yourdfpy
+
+from foosball_gym import table as T
+from foosball_gym.simulator import TableSim, urdf_path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# SPEC §1, written out again on purpose: a change to table.py must be a change to this too.
+SPEC_RODS = {
+    "home_keeper": (-0.52200, 1, 0.1230),
+    "home_defense": (-0.37295, 2, 0.1790),
+    "away_offense": (-0.22372, 3, 0.1185),
+    "home_midfield": (-0.07469, 5, 0.0615),
+    "away_midfield": (0.07469, 5, 0.0615),
+    "home_offense": (0.22372, 3, 0.1185),
+    "away_defense": (0.37295, 2, 0.1790),
+    "away_keeper": (0.52200, 1, 0.1230),
+}
+
+
+@pytest.fixture(scope="module")
+def urdf() -> yourdfpy.URDF:
+    return yourdfpy.URDF.load(str(urdf_path()), load_meshes=False, build_scene_graph=False)
+
+
+def test_urdf_has_two_joints_per_rod_with_spec_limits(urdf):
+    movable = {n: j for n, j in urdf.joint_map.items() if j.type != "fixed"}
+    assert len(movable) == 16
+    for name, (x, _, slide_limit) in SPEC_RODS.items():
+        slide, spin = movable[f"{name}_slide"], movable[f"{name}_spin"]
+        assert slide.type == "prismatic" and spin.type == "revolute"
+        assert slide.limit.lower == pytest.approx(-slide_limit)
+        assert slide.limit.upper == pytest.approx(slide_limit)
+        assert slide.limit.effort == pytest.approx(70.0)
+        assert slide.limit.velocity == pytest.approx(4.0)
+        assert spin.limit.lower == pytest.approx(-2 * math.pi, rel=1e-5)
+        assert spin.limit.upper == pytest.approx(2 * math.pi, rel=1e-5)
+        assert spin.limit.effort == pytest.approx(1.41)
+        assert spin.limit.velocity == pytest.approx(100 * math.pi, rel=1e-5)
+        assert slide.origin[0, 3] == pytest.approx(x)
+        assert slide.origin[2, 3] == pytest.approx(0.083)
+
+
+def test_urdf_has_22_figurines_at_spec_offsets(urdf):
+    figurines = [n for n in urdf.link_map if "_figurine_" in n]
+    assert len(figurines) == 22
+    for name, (_, count, _) in SPEC_RODS.items():
+        mounts = [j for n, j in urdf.joint_map.items() if n.startswith(f"{name}_figurine_")]
+        assert len(mounts) == count
+        offsets = sorted(round(j.origin[1, 3], 4) for j in mounts)
+        assert offsets == sorted(round(o, 4) for o in T.rod(name).figurine_offsets)
+        for j in mounts:
+            # Foot 0.011 m above the surface: the box centre hangs below the rod axis.
+            box = urdf.link_map[j.child].collisions[0].geometry.box.size
+            assert tuple(box) == pytest.approx((0.030, 0.034, 0.112))
+            assert 0.083 + j.origin[2, 3] - 0.112 / 2 == pytest.approx(0.011)
+
+
+def test_away_rods_are_turned_half_a_turn(urdf):
+    for name in SPEC_RODS:
+        yaw_cos = urdf.joint_map[f"{name}_slide"].origin[0, 0]
+        assert yaw_cos == pytest.approx(1.0 if name.startswith("home") else -1.0)
+
+
+def test_committed_urdf_is_what_the_generator_writes():
+    sys.path.insert(0, str(ROOT))
+    from urdf import generate
+
+    assert (ROOT / "urdf" / generate.TABLE_FILE).read_text() == generate.table_urdf()
+    assert (ROOT / "urdf" / generate.BALL_FILE).read_text() == generate.ball_urdf()
+
+
+def test_urdf_loads_in_pybullet_with_every_rod():
+    sim = TableSim([r.name for r in T.RODS])
+    try:
+        assert sim._p.getNumJoints(sim.body) == 16  # figurines merged into their rods
+    finally:
+        sim.close()
+
+
+def test_wheel_ships_the_urdf_and_an_installed_copy_runs(tmp_path):
+    """Build a wheel, install it without the source tree on the path, make an env."""
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(tmp_path),
+            str(ROOT),
+        ],
+        check=True,
+    )
+    wheel = next(tmp_path.glob("foosball_gym-*.whl"))
+    with zipfile.ZipFile(wheel) as zf:
+        names = zf.namelist()
+    assert "foosball_gym/urdf/foosball_table.urdf" in names
+    assert "foosball_gym/urdf/ball.urdf" in names
+    site = tmp_path / "site"
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--no-deps",
+            "-q",
+            "--target",
+            str(site),
+            str(wheel),
+        ],
+        check=True,
+    )
+    code = (
+        "import foosball_gym, gymnasium as gym, sys;"
+        "assert foosball_gym.__file__.startswith(sys.argv[1]), foosball_gym.__file__;"
+        "env = gym.make('Foosball-Block-v0'); env.reset(seed=0); env.step([0.0]);"
+        "print('ok')"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code, str(site)],
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
+        capture_output=True,
+        text=True,
+    )
+    assert out.returncode == 0, out.stderr
+    assert "ok" in out.stdout
