@@ -8,7 +8,12 @@ from gymnasium.envs.registration import register, registry
 __version__ = "0.1.0"
 
 # id, entry point, max_episode_steps (60 Hz control steps)
-_ENVS = (("Foosball-Block-v0", "foosball_gym.envs.block:BlockEnv", 90),)
+_ENVS = (
+    ("Foosball-Block-v0", "foosball_gym.envs.block:BlockEnv", 90),
+    ("Foosball-Score-v0", "foosball_gym.envs.score:ScoreEnv", 180),
+    ("Foosball-KeeperVsKeeper-v0", "foosball_gym.envs.keeper_vs_keeper:KeeperVsKeeperEnv", 1800),
+    ("Foosball-FullGame-v0", "foosball_gym.envs.full_game:FullGameEnv", 3600),
+)
 
 ENV_IDS: tuple[str, ...] = tuple(env_id for env_id, _, _ in _ENVS)
 

@@ -318,6 +318,12 @@ class TableSim:
             ball_velocity: (vx, vy) or (vx, vy, vz); the ball is given the spin of rolling
                 without slipping, so it does not skid when it starts.
         """
+        # One step with the ball alone, high above the table, clears what Bullet carries in the
+        # ball from step to step (cached contacts, split-impulse velocities): without it a
+        # reset state plays out a hair (1e-34) differently from the same state in a new table.
+        self._p.resetBasePositionAndOrientation(self.ball, [0.0, 0.0, 5.0], [0.0, 0.0, 0.0, 1.0])
+        self._p.resetBaseVelocity(self.ball, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+        self._step_sim()
         slide = np.zeros(self._n) if slide is None else np.asarray(slide, dtype=float)
         spin = np.zeros(self._n) if spin is None else np.asarray(spin, dtype=float)
         if slide.shape != (self._n,) or spin.shape != (self._n,):

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import math
+
 import gymnasium as gym
+import numpy as np
 import pytest
 
 from foosball_gym import ENV_IDS
@@ -65,5 +68,107 @@ def test_reward_is_the_sum_of_the_terms_in_info(env_id):
             if terminated or truncated:
                 env.reset()
         assert {"ball_to_goal", "figurine_to_ball", "action_regularisation"} <= seen_nonzero
+    finally:
+        env.close()
+
+
+def test_ball_to_goal_potential_is_one_in_the_goal_mouth_and_decays_with_distance():
+    from foosball_gym.envs.rewards import ball_to_goal_potential
+
+    assert ball_to_goal_potential(0.61725, 0.0) == pytest.approx(1.0)
+    assert ball_to_goal_potential(0.61725, 0.08) == pytest.approx(1.0)  # within the mouth
+    assert ball_to_goal_potential(0.0, 0.0) == pytest.approx(math.exp(-6 * 0.61725))
+    assert ball_to_goal_potential(0.61725, 0.18525) == pytest.approx(math.exp(-6 * 0.1))
+
+
+def test_figurine_to_ball_potential_is_zero_when_aligned():
+    from foosball_gym.envs.rewards import figurine_to_ball_potential
+
+    assert figurine_to_ball_potential(0.05, [[0.05]]) == pytest.approx(0.0)
+    assert figurine_to_ball_potential(0.2, [[0.0], [0.1, 0.3]]) == pytest.approx(
+        -(1 - (math.exp(-1.2) + math.exp(-0.6)) / 2)
+    )
+
+
+def shaped_episode(shaping, weights):
+    env = gym.make(
+        "Foosball-Score-v0",
+        ball_start="incoming",
+        shaping=shaping,
+        gamma=0.9,
+        action_regularisation_weight=0.0,
+        **weights,
+    )
+    obs, _ = env.reset(seed=4)
+    states, infos = [obs], []
+    rng = np.random.default_rng(0)
+    done = False
+    while not done:
+        obs, reward, terminated, truncated, info = env.step(
+            rng.uniform(-1, 1, 2).astype(np.float32)
+        )
+        states.append(obs)
+        infos.append(info)
+        done = terminated or truncated
+    env.close()
+    return states, infos, terminated
+
+
+@pytest.mark.parametrize("shaping, gamma", [("difference", 1.0), ("potential", 0.9)])
+def test_ball_to_goal_shaping_follows_its_formula(shaping, gamma):
+    from foosball_gym.envs.rewards import ball_to_goal_potential
+
+    states, infos, terminated = shaped_episode(shaping, {"ball_to_goal_weight": 2.0})
+    phi = [ball_to_goal_potential(float(s[4]), float(s[5])) for s in states]
+    for k, info in enumerate(infos):
+        last = terminated and k == len(infos) - 1 and shaping == "potential"
+        expected = 2.0 * ((0.0 if last else gamma * phi[k + 1]) - phi[k])
+        assert info["reward_ball_to_goal"] == pytest.approx(expected, abs=1e-5)
+
+
+def test_difference_shaping_telescopes_over_an_episode():
+    from foosball_gym.envs.rewards import figurine_to_ball_potential
+
+    states, infos, _ = shaped_episode("difference", {"figurine_to_ball_weight": 3.0})
+    total = sum(i["reward_figurine_to_ball"] for i in infos)
+
+    def phi(s):
+        return figurine_to_ball_potential(float(s[5]), [[float(s[0])]])
+
+    assert total == pytest.approx(3.0 * (phi(states[-1]) - phi(states[0])), abs=1e-4)
+
+
+def test_action_regularisation_penalises_changes_of_action():
+    env = gym.make("Foosball-Score-v0", action_regularisation_weight=2.0)
+    try:
+        env.reset(seed=0)
+        _, _, _, _, info = env.step(np.array([0.5, -0.5], np.float32))
+        assert info["reward_action_regularisation"] == pytest.approx(-2.0 * 0.25, abs=1e-6)
+        _, _, _, _, info = env.step(np.array([0.5, -0.5], np.float32))
+        assert info["reward_action_regularisation"] == pytest.approx(0.0)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize(
+    "env_id, expected",
+    [
+        (
+            "Foosball-Block-v0",
+            {"goal": 1000.0, "out_of_table": 1000.0, "action_regularisation": 0.0},
+        ),
+        (
+            "Foosball-Score-v0",
+            {"goal": 1000.0, "out_of_table": 1000.0, "action_regularisation": 0.5},
+        ),
+        ("Foosball-KeeperVsKeeper-v0", {"goal": 1000.0, "action_regularisation": 0.0}),
+        ("Foosball-FullGame-v0", {"goal": 1000.0, "ball_to_goal": 0.0}),
+    ],
+)
+def test_default_weights_are_the_papers(env_id, expected):
+    env = gym.make(env_id)
+    try:
+        for name, value in expected.items():
+            assert getattr(env.unwrapped.weights, name) == value
     finally:
         env.close()

@@ -50,3 +50,47 @@ def test_wall_bounce_prediction():
 def test_scripted_keeper_names_what_it_misses():
     with pytest.raises(ValueError, match="ball_vx"):
         ScriptedKeeper(["ball_x", "ball_y"])
+
+
+def test_scripted_keeper_scores_from_rest_in_most_episodes():
+    env = gym.make("Foosball-Score-v0")
+    policy = env.unwrapped.scripted_policy()
+    scored = 0
+    try:
+        for seed in range(100):
+            obs, _ = env.reset(seed=seed)
+            done = False
+            while not done:
+                obs, _, terminated, truncated, info = env.step(policy(obs))
+                done = terminated or truncated
+            scored += info["is_success"]
+    finally:
+        env.close()
+    assert scored >= 80
+
+
+def test_scripted_team_lifts_its_feet_for_its_own_shots_and_shoots_a_ball_in_reach():
+    from foosball_gym import table as T
+    from foosball_gym.policies.scripted import KICK_ANGLE, WIND_UP_ANGLE, ScriptedTeam
+
+    names = [
+        "home_defense_slide_pos",
+        "home_defense_spin_pos",
+        "ball_x",
+        "ball_y",
+        "ball_vx",
+        "ball_vy",
+    ]
+    team = ScriptedTeam(names, ("home_defense",), "both")
+    rod = T.rod("home_defense")
+    # Ball behind the rod, rolling forward: feet up.
+    a = team(np.array([0.0, 0.0, rod.x - 0.1, 0.0, 2.0, 0.0], np.float32))
+    assert a[1] * T.SPIN_LIMIT == pytest.approx(WIND_UP_ANGLE)
+    # Ball still, 5 cm in front, figurine lined up, feet down: swing.
+    y = rod.figurine_offsets[0]
+    a = team(np.array([0.0, 0.0, rod.x + 0.05, y, 0.0, 0.0], np.float32))
+    assert a[1] * T.SPIN_LIMIT == pytest.approx(KICK_ANGLE)
+    # Same ball, figurine not lined up: wind up while sliding over.
+    a = team(np.array([0.05, 0.0, rod.x + 0.05, y, 0.0, 0.0], np.float32))
+    assert a[1] * T.SPIN_LIMIT == pytest.approx(WIND_UP_ANGLE)
+    assert a[0] * rod.slide_limit == pytest.approx(0.0, abs=1e-6)

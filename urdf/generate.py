@@ -99,7 +99,8 @@ def _table_link(robot: ET.Element) -> None:
         _box(link, (x0, -gw, gh), (x1, gw, h), "wall", f"{team}_goal_crossbar")
         # The pocket: floor, back wall, side walls and a roof, so a goal stays a goal.
         px0, px1 = sorted((sign * end_out, sign * back))
-        _box(link, (px0, -gw, -s), (px1, gw, 0.0), "pocket", f"{team}_pocket_floor")
+        fx0, fx1 = sorted((sign * lx, sign * back))  # the floor runs on under the goal mouth
+        _box(link, (fx0, -gw, -s), (fx1, gw, 0.0), "pocket", f"{team}_pocket_floor")
         _box(link, (px0, -gw - w, gh), (px1, gw + w, gh + w), "pocket", f"{team}_pocket_roof")
         for side, ysign in (("left", 1.0), ("right", -1.0)):
             y0, y1 = sorted((ysign * gw, ysign * (gw + w)))

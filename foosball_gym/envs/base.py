@@ -3,7 +3,7 @@
 A task says which rods the learner controls (and which of their joints), which rods an
 opponent plays, which rods stand still as obstacles, how an episode starts and what counts as
 success. This class does the rest: action scaling, driving the simulator, observations,
-reward terms, info, rendering and seeding.
+reward terms, info, the opponent, rendering and seeding.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from foosball_gym.envs.observations import (
     mirrored_builder,
 )
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
+from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.simulator import AWAY_SCORED, HOME_SCORED, TableSim
 
 Policy = Callable[[np.ndarray], Any]
@@ -33,6 +34,8 @@ Policy = Callable[[np.ndarray], Any]
 RENDER_MODES = ("human", "rgb_array")
 _BALL_LIMIT_X = T.FIELD_HALF_LENGTH - T.BALL_RADIUS
 _BALL_LIMIT_Y = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
+# A ball slower than this (m/s) counts as lying still for the stagnation rule.
+STILL_SPEED = 0.05
 
 
 @dataclass(frozen=True)
@@ -43,7 +46,7 @@ class Layout:
         controlled: home rods the learner drives, keeper first.
         joints: ``"slide"`` (prismatic only) or ``"both"``: the learner's action joints.
         opponent: away rods an opponent policy drives (the mirror of ``controlled``).
-        static: rods held still at the start position (obstacles).
+        static: rods held still at their start position (obstacles).
     """
 
     controlled: tuple[str, ...]
@@ -58,7 +61,7 @@ class Layout:
 
 @dataclass
 class Start:
-    """An episode's first state; joint arrays follow ``Layout.rods``."""
+    """An episode's first state; joint lists follow ``Layout.rods``."""
 
     slide: list[float]
     spin: list[float]
@@ -67,7 +70,7 @@ class Start:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-def _pair(name: str, value: Any) -> tuple[float, float]:
+def check_pair(name: str, value: Any) -> tuple[float, float]:
     try:
         x, y = (float(v) for v in value)
     except (TypeError, ValueError):
@@ -78,30 +81,107 @@ def _pair(name: str, value: Any) -> tuple[float, float]:
 
 
 def check_ball_position(name: str, value: Any) -> tuple[float, float]:
-    x, y = _pair(name, value)
+    x, y = check_pair(name, value)
     if abs(x) > _BALL_LIMIT_X or abs(y) > _BALL_LIMIT_Y:
         raise ValueError(
-            f"option {name!r} = ({x}, {y}) is off the field; the ball's centre "
-            f"must lie within |x| <= {_BALL_LIMIT_X:.5f}, |y| <= {_BALL_LIMIT_Y:.5f} m"
+            f"option {name!r} = ({x}, {y}) is off the field; the ball's centre must lie "
+            f"within |x| <= {_BALL_LIMIT_X:.5f}, |y| <= {_BALL_LIMIT_Y:.5f} m"
         )
     return x, y
 
 
+def _flag(name: str, value: object) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def clear_of_ball(rod: T.Rod, slide: float, ball: tuple[float, float]) -> float:
+    """A slide value near ``slide`` at which no figurine of ``rod`` overlaps the ball.
+
+    Tasks put the ball at rest close to a rod; starting with a figurine inside the ball would
+    throw it across the table on the first step.
+    """
+    bx, by = ball
+    reach_x = T.FIGURINE_SIZE[0] / 2 + T.BALL_RADIUS
+    if abs(bx - rod.x) >= reach_x:
+        return slide
+    gap = T.FIGURINE_SIZE[1] / 2 + T.BALL_RADIUS + 0.002
+    d = rod.direction
+    for off in rod.figurine_offsets:
+        fig_y = d * (slide + off)
+        if abs(fig_y - by) < gap:
+            # Move the figurine just beside the ball, on whichever side stays within the limits.
+            for side in (np.sign(fig_y - by) or 1.0, -(np.sign(fig_y - by) or 1.0)):
+                candidate = d * (by + side * gap) - off
+                if abs(candidate) <= rod.slide_limit:
+                    return clear_of_ball(rod, candidate, ball)
+    return slide
+
+
 class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
-    """Base class of the foosball tasks; see the task classes for what each one is."""
+    """Base class of the foosball tasks; see the task classes for what each one is.
+
+    Keyword arguments every task takes:
+
+    Rewards (SPEC §3; every term is also in ``info["reward_<name>"]``):
+        goal_reward: +weight for a goal scored, -weight for one conceded (1000).
+        out_of_table_penalty: -weight when the ball leaves the table upwards (1000).
+        ball_to_goal_weight: weight of the ball-to-opponent-goal potential (0: off).
+        figurine_to_ball_weight: weight of the figurine-to-ball potential (0: off).
+        action_regularisation_weight: weight of -mean((a_t - a_{t-1})^2) (0: off).
+        shaping: ``"difference"`` (the authors' per-step difference of the potentials) or
+            ``"potential"`` (gamma * phi(s') - phi(s), which keeps the optimal policy).
+        gamma: discount of potential-based shaping (0.99).
+
+    Observation:
+        joint_velocities: include the rods' velocities (True).
+        observe_figurines: figurine centres (x, y) instead of joint values (False).
+        opponent_prismatic_only: observe only the opponent's prismatic joints, as the real
+            table's camera does (tasks with an opponent only).
+
+    Other:
+        opponent: the away side's policy, a callable from the mirrored observation to an
+            action (tasks with an opponent only; default: the scripted team).
+        stagnation_steps: end the game as a draw when the ball has lain still for this many
+            steps (0: never).
+        render_mode: ``None``, ``"rgb_array"`` or ``"human"`` (the PyBullet GUI).
+        render_width, render_height: size of ``"rgb_array"`` frames (320 x 180).
+        physics_hz, substeps: physics rate (240) and physics steps per env step (4).
+    """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": T.CONTROL_HZ}
     #: Keys ``reset(options=...)`` accepts; tasks may add their own.
     reset_options: tuple[str, ...] = ("ball_position", "ball_velocity")
+    #: The task's own discrete options and the values each takes (first: the default).
+    task_options: dict[str, tuple[Any, ...]] = {}
+
+    @classmethod
+    def option_grid(cls) -> dict[str, tuple[Any, ...]]:
+        """Every discrete option of this task with its values: what the tests iterate over."""
+        return {
+            "joint_velocities": (True, False),
+            "observe_figurines": (False, True),
+            **cls.task_options,
+        }
 
     def __init__(
         self,
         layout: Layout,
         *,
-        weights: RewardWeights,
-        observation: ObservationOptions,
         extras: Sequence[str] = (),
         opponent: Policy | None = None,
+        goal_reward: float = 1000.0,
+        out_of_table_penalty: float = 1000.0,
+        ball_to_goal_weight: float = 0.0,
+        figurine_to_ball_weight: float = 0.0,
+        action_regularisation_weight: float = 0.0,
+        shaping: str = "difference",
+        gamma: float = 0.99,
+        joint_velocities: bool = True,
+        observe_figurines: bool = False,
+        opponent_prismatic_only: bool = False,
+        stagnation_steps: int = 0,
         render_mode: str | None = None,
         render_width: int = 320,
         render_height: int = 180,
@@ -125,12 +205,36 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         ):
             if not isinstance(value, (int, np.integer)) or value <= 0:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if not isinstance(stagnation_steps, (int, np.integer)) or stagnation_steps < 0:
+            raise ValueError(
+                f"stagnation_steps must be a non-negative integer, got {stagnation_steps!r}"
+            )
+        if _flag("opponent_prismatic_only", opponent_prismatic_only) and not layout.opponent:
+            raise ValueError(
+                f"opponent_prismatic_only applies only to tasks with an opponent; "
+                f"{type(self).__name__} has none"
+            )
+        if opponent is not None and not layout.opponent:
+            raise ValueError(f"{type(self).__name__} has no opponent to set")
         self.layout = layout
         self.render_mode = render_mode
         self.render_width, self.render_height = int(render_width), int(render_height)
         self.metadata = {**self.metadata, "render_fps": physics_hz / substeps}
-        self.weights = weights
-        self.observation_options = observation
+        self.weights = RewardWeights(
+            goal=goal_reward,
+            out_of_table=out_of_table_penalty,
+            ball_to_goal=ball_to_goal_weight,
+            figurine_to_ball=figurine_to_ball_weight,
+            action_regularisation=action_regularisation_weight,
+            shaping=shaping,
+            gamma=gamma,
+        )
+        self.observation_options = ObservationOptions(
+            joint_velocities=_flag("joint_velocities", joint_velocities),
+            opponent_prismatic_only=opponent_prismatic_only,
+            observe_figurines=_flag("observe_figurines", observe_figurines),
+        )
+        self.stagnation_steps = int(stagnation_steps)
 
         self.sim = TableSim(
             layout.rods, physics_hz=physics_hz, substeps=substeps, gui=render_mode == "human"
@@ -138,39 +242,31 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self.dt = self.sim.control_dt
         n = len(layout.rods)
         self._n = n
-        rods = [T.rod(r) for r in layout.rods]
-        # Action k drives joint _act_joint[k] (index into the simulator's slides-then-spins).
-        self._act_joint: list[int] = []
-        self._act_scale: list[float] = []
-        for i, rod in enumerate(rods[: len(layout.controlled)]):
-            self._act_joint.append(i)
-            self._act_scale.append(rod.slide_limit)
-            if layout.joints == "both":
-                self._act_joint.append(n + i)
-                self._act_scale.append(T.SPIN_LIMIT)
+        self._rods = [T.rod(r) for r in layout.rods]
+        n_own = len(layout.controlled)
+        # Action k drives joint _act_joint[k] (an index into the simulator's slides-then-spins).
+        self._act_joint, self._act_scale = self._action_map(0, n_own)
         self._n_act = len(self._act_joint)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(self._n_act,), dtype=np.float32)
 
         self.obs_builder = ObservationBuilder(
-            layout.rods, layout.controlled, layout.joints, layout.opponent, extras, observation
+            layout.rods,
+            layout.controlled,
+            layout.joints,
+            layout.opponent,
+            extras,
+            self.observation_options,
         )
         self.observation_space = self.obs_builder.space
-        self._rewards = RewardComputer(weights, rods[: len(layout.controlled)])
+        self._rewards = RewardComputer(self.weights, self._rods[:n_own])
 
         self._opp_builder: ObservationBuilder | None = None
         self._opp_joint: list[int] = []
         self._opp_scale: list[float] = []
+        self._opponent: Policy | None = None
         if layout.opponent:
             self._opp_builder = mirrored_builder(self.obs_builder)
-            first = len(layout.controlled)
-            for i, rod in enumerate(rods[first : first + len(layout.opponent)], start=first):
-                self._opp_joint.append(i)
-                self._opp_scale.append(rod.slide_limit)
-                if layout.joints == "both":
-                    self._opp_joint.append(n + i)
-                    self._opp_scale.append(T.SPIN_LIMIT)
-        self._opponent: Policy | None = None
-        if opponent is not None:
+            self._opp_joint, self._opp_scale = self._action_map(n_own, len(layout.opponent))
             self.set_opponent(opponent)
 
         self._targets = [0.0] * (2 * n)
@@ -179,8 +275,19 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self._ball = (0.0, 0.0, 0.0, 0.0)
         self._goals_for = 0
         self._goals_against = 0
+        self._still_steps = 0
         self._last_render = 0.0
         self._started = False
+
+    def _action_map(self, first: int, count: int) -> tuple[list[int], list[float]]:
+        joints, scales = [], []
+        for i in range(first, first + count):
+            joints.append(i)
+            scales.append(self._rods[i].slide_limit)
+            if self.layout.joints == "both":
+                joints.append(self._n + i)
+                scales.append(T.SPIN_LIMIT)
+        return joints, scales
 
     # ------------------------------------------------------------------ task hooks
 
@@ -195,11 +302,15 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     def _is_success(self) -> bool:
         raise NotImplementedError
 
-    def _after_goal(self, goal: int) -> bool:
-        """Called on a goal; returns True when the episode ends there."""
-        return True
+    def _continues_after_goal(self) -> bool:
+        """True where a goal (or a dead ball) re-serves instead of ending the episode."""
+        return False
 
-    # ------------------------------------------------------------------ opponent
+    # ------------------------------------------------------------------ policies
+
+    def scripted_policy(self) -> ScriptedTeam:
+        """The scripted baseline for the learner's side of this task."""
+        return ScriptedTeam(self.obs_builder.names, self.layout.controlled, self.layout.joints)
 
     @property
     def opponent(self) -> Policy | None:
@@ -207,18 +318,21 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def set_opponent(self, policy: Policy | None) -> None:
         """Set the policy that plays the away side: a callable from the mirrored observation
-        (the game as the away side sees it from its own goal) to an action in [-1, 1]."""
+        (the game as the away side sees it from its own goal) to an action in [-1, 1].
+        ``None`` restores the scripted default."""
         if not self.layout.opponent:
             raise ValueError(f"{type(self).__name__} has no opponent to set")
         if policy is not None and not callable(policy):
             raise ValueError(f"an opponent must be a callable obs -> action, got {policy!r}")
-        self._opponent = policy if policy is not None else self._default_opponent()
-
-    def _default_opponent(self) -> Policy:
-        raise NotImplementedError
+        if policy is None:
+            assert self._opp_builder is not None
+            policy = ScriptedTeam(
+                self._opp_builder.names, self._opp_builder.own, self.layout.joints
+            )
+        self._opponent = policy
 
     def opponent_observation(self) -> np.ndarray:
-        """What the opponent sees now (the mirrored observation)."""
+        """What the opponent sees now: the mirrored observation."""
         if self._opp_builder is None:
             raise ValueError(f"{type(self).__name__} has no opponent")
         return self._opp_builder.build(self._pos, self._vel, self._ball)
@@ -241,20 +355,26 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         if ball_position is not None:
             ball_position = check_ball_position("ball_position", ball_position)
         if ball_velocity is not None:
-            ball_velocity = _pair("ball_velocity", ball_velocity)
-        start = self._sample_start(ball_position, ball_velocity, options)
-        self.sim.reset(start.slide, start.spin, start.ball_position, start.ball_velocity)
-        for i, value in enumerate((*start.slide, *start.spin)):
-            self._targets[i] = float(value)
-        self._read_state()
+            ball_velocity = check_pair("ball_velocity", ball_velocity)
         self._goals_for = self._goals_against = 0
+        self._serve(self._sample_start(ball_position, ball_velocity, options))
         self._started = True
-        self._rewards.reset(self._controlled_slides(), self._ball[0], self._ball[1], self._n_act)
         obs = self.obs_builder.build(self._pos, self._vel, self._ball)
         info = {"goal": 0, "is_success": self._is_success(), **self._score_info()}
         if self.render_mode == "human":
             self.render()
         return obs, info
+
+    def _serve(self, start: Start) -> None:
+        slide = [
+            clear_of_ball(rod, s, start.ball_position) for rod, s in zip(self._rods, start.slide)
+        ]
+        self.sim.reset(slide, start.spin, start.ball_position, start.ball_velocity)
+        for i, value in enumerate((*slide, *start.spin)):
+            self._targets[i] = float(value)
+        self._read_state()
+        self._still_steps = 0
+        self._rewards.reset(self._controlled_slides(), self._ball[0], self._ball[1], self._n_act)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if not self._started:
@@ -276,23 +396,40 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             self._goals_for += 1
         elif goal == AWAY_SCORED:
             self._goals_against += 1
-        terminated = out or (goal != 0 and self._after_goal(goal))
+        stagnated = self._stagnated()
+        ended = out or goal != 0 or stagnated
+        continuous = ended and self._continues_after_goal()
         terms = self._rewards.step(
-            goal, out, self._controlled_slides(), self._ball[0], self._ball[1], act, terminated
+            goal,
+            out,
+            self._controlled_slides(),
+            self._ball[0],
+            self._ball[1],
+            act,
+            ended and not continuous,
         )
-        reward = sum(terms.values())
-        obs = self.obs_builder.build(self._pos, self._vel, self._ball)
         info = {
             "goal": goal,
             "is_success": self._is_success(),
             "out_of_table": out,
+            "stagnated": stagnated,
             **self._score_info(),
         }
         for name in TERMS:
             info["reward_" + name] = terms[name]
+        if continuous:
+            self._serve(self._sample_start(None, None, {}))
+        obs = self.obs_builder.build(self._pos, self._vel, self._ball)
         if self.render_mode == "human":
             self.render()
-        return obs, float(reward), bool(terminated), False, info
+        return obs, float(sum(terms.values())), ended and not continuous, False, info
+
+    def _stagnated(self) -> bool:
+        if not self.stagnation_steps:
+            return False
+        _, _, vx, vy = self._ball
+        self._still_steps = self._still_steps + 1 if vx * vx + vy * vy < STILL_SPEED**2 else 0
+        return self._still_steps >= self.stagnation_steps
 
     def render(self) -> np.ndarray | None:
         if self.render_mode == "rgb_array":
@@ -340,8 +477,11 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._pos[: len(self.layout.controlled)]
 
     def _score_info(self) -> dict[str, Any]:
-        return {}
+        if not self.layout.opponent:
+            return {}
+        return {"goals_for": self._goals_for, "goals_against": self._goals_against}
 
     def rod_joint_values(self) -> tuple[list[float], list[float]]:
-        """Current joint positions and velocities of the rods in play (slides, then spins)."""
+        """Joint positions and velocities of the rods in play (all slides, then all spins, in
+        ``layout.rods`` order), as of the last reset or step."""
         return list(self._pos), list(self._vel)

@@ -6,7 +6,7 @@ from typing import Any
 
 from foosball_gym import table as T
 from foosball_gym.envs.base import FoosballEnv, Layout, Start
-from foosball_gym.envs.common import check_range, make_options, make_weights, shot_at_goal
+from foosball_gym.envs.common import check_range, random_shot_start, shot_at_goal
 
 
 class BlockEnv(FoosballEnv):
@@ -33,19 +33,18 @@ class BlockEnv(FoosballEnv):
 
     With ``joint_velocities=False`` index 1 is left out. With ``observe_figurines=True`` the
     keeper's joint values are replaced by its figurine's centre (x, y) and its velocity.
-    ``env.unwrapped.obs_builder.names`` always lists the indices.
+    ``env.unwrapped.obs_builder.names`` always lists the entries.
 
     ## Rewards
-    ``-goal_reward`` (default -1000) when a goal is conceded, ``-out_of_table_penalty`` when
-    the ball leaves the table upwards; shaping terms (``ball_to_goal_weight``,
-    ``figurine_to_ball_weight``, ``action_regularisation_weight``) are off by default, as in
-    the paper's blocking task. Every term is in ``info["reward_<name>"]``.
+    ``-goal_reward`` (-1000) when a goal is conceded, ``-out_of_table_penalty`` (-1000) when
+    the ball leaves the table upwards; no shaping by default, as in the authors' blocking task.
+    Every term is in ``info["reward_<name>"]``.
 
     ## Starting State
-    Keeper centred. Ball at x ~ U(0, 0.4), y ~ U(-0.3, 0.3), shot at ``speed`` ~ U(2, 7) m/s
-    at a uniform point of the home goal mouth (a goal if nothing stops it).
+    Keeper centred. Ball at x ~ U(0, 0.4), y ~ U(-0.3, 0.3), shot at ``speed_range`` ~
+    U(2, 7) m/s at a uniform point of the home goal mouth (a goal if nothing stops it).
     ``reset(options={"ball_position": (x, y), "ball_velocity": (vx, vy)})`` places the ball
-    exactly; with only a position the shot is aimed from there.
+    exactly; with only a position, the shot is aimed from there.
 
     ## Episode End
     Terminated on a goal (either way) or when the ball leaves the table; truncated after 90
@@ -53,61 +52,27 @@ class BlockEnv(FoosballEnv):
     so far. ``info["goal"]``: +1 scored, -1 conceded, 0 none.
 
     ## Arguments
-    ``speed_range`` (m/s), the reward weights and ``shaping``/``gamma`` (see
-    ``foosball_gym.envs.rewards``), ``joint_velocities``, ``observe_figurines``,
-    ``render_mode`` (``"rgb_array"``, ``"human"``), ``render_width``, ``render_height``,
-    ``physics_hz``, ``substeps``.
+    ``speed_range`` (m/s), and every keyword of :class:`FoosballEnv` (reward weights,
+    ``shaping``, ``gamma``, ``joint_velocities``, ``observe_figurines``, ``render_mode``,
+    ``render_width``, ``render_height``, ``physics_hz``, ``substeps``).
 
     ## Version History
     - v0: first version.
     """
 
-    def __init__(
-        self,
-        *,
-        speed_range: tuple[float, float] = (2.0, 7.0),
-        goal_reward: float = 1000.0,
-        out_of_table_penalty: float = 1000.0,
-        ball_to_goal_weight: float = 0.0,
-        figurine_to_ball_weight: float = 0.0,
-        action_regularisation_weight: float = 0.0,
-        shaping: str = "difference",
-        gamma: float = 0.99,
-        joint_velocities: bool = True,
-        observe_figurines: bool = False,
-        render_mode: str | None = None,
-        render_width: int = 320,
-        render_height: int = 180,
-        physics_hz: int = T.PHYSICS_HZ,
-        substeps: int = T.PHYSICS_HZ // T.CONTROL_HZ,
-    ) -> None:
-        self.speed_range = check_range("speed_range", speed_range)
-        super().__init__(
-            Layout(controlled=("home_keeper",), joints="slide"),
-            weights=make_weights(
-                goal_reward,
-                out_of_table_penalty,
-                ball_to_goal_weight,
-                figurine_to_ball_weight,
-                action_regularisation_weight,
-                shaping,
-                gamma,
-            ),
-            observation=make_options(joint_velocities, False, observe_figurines),
-            render_mode=render_mode,
-            render_width=render_width,
-            render_height=render_height,
-            physics_hz=physics_hz,
-            substeps=substeps,
-        )
+    def __init__(self, *, speed_range: tuple[float, float] = (2.0, 7.0), **kwargs: Any) -> None:
+        self.speed_range = check_range("speed_range", speed_range, low=1e-3)
+        super().__init__(Layout(controlled=("home_keeper",), joints="slide"), **kwargs)
 
     def _sample_start(self, ball_position, ball_velocity, options: dict[str, Any]) -> Start:
         rng = self.np_random
-        if ball_position is None:
-            ball_position = (float(rng.uniform(0.0, 0.4)), float(rng.uniform(-0.3, 0.3)))
-        if ball_velocity is None:
-            ball_velocity = shot_at_goal(rng, ball_position, self.speed_range, T.HOME)
-        return Start([0.0], [0.0], ball_position, ball_velocity)
+        position, velocity = random_shot_start(rng, self.speed_range)
+        if ball_position is not None:
+            position = ball_position
+            velocity = shot_at_goal(rng, position, self.speed_range, T.HOME)
+        if ball_velocity is not None:
+            velocity = ball_velocity
+        return Start([0.0], [0.0], position, velocity)
 
     def _is_success(self) -> bool:
         return self._goals_against == 0

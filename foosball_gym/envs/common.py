@@ -7,46 +7,10 @@ import math
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.envs.observations import ObservationOptions
-from foosball_gym.envs.rewards import RewardWeights
 
 GOAL_MOUTH_HALF = T.GOAL_HALF_WIDTH - T.BALL_RADIUS
-
-
-def _flag(name: str, value: object) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"{name} must be True or False, got {value!r}")
-    return bool(value)
-
-
-def make_weights(
-    goal_reward: float,
-    out_of_table_penalty: float,
-    ball_to_goal_weight: float,
-    figurine_to_ball_weight: float,
-    action_regularisation_weight: float,
-    shaping: str,
-    gamma: float,
-) -> RewardWeights:
-    return RewardWeights(
-        goal=goal_reward,
-        out_of_table=out_of_table_penalty,
-        ball_to_goal=ball_to_goal_weight,
-        figurine_to_ball=figurine_to_ball_weight,
-        action_regularisation=action_regularisation_weight,
-        shaping=shaping,
-        gamma=gamma,
-    )
-
-
-def make_options(
-    joint_velocities: bool, opponent_prismatic_only: bool, observe_figurines: bool
-) -> ObservationOptions:
-    return ObservationOptions(
-        joint_velocities=_flag("joint_velocities", joint_velocities),
-        opponent_prismatic_only=_flag("opponent_prismatic_only", opponent_prismatic_only),
-        observe_figurines=_flag("observe_figurines", observe_figurines),
-    )
+# The spec's resting ball: 0.497 m from the centre line, +-5 mm, in front of a keeper.
+REST_X, REST_X_JITTER, REST_Y = 0.497, 0.005, 0.1
 
 
 def check_range(name: str, value: tuple[float, float], low: float = 0.0) -> tuple[float, float]:
@@ -57,6 +21,12 @@ def check_range(name: str, value: tuple[float, float], low: float = 0.0) -> tupl
     if not (low <= lo <= hi and math.isfinite(hi)):
         raise ValueError(f"{name} must be (low, high) with {low} <= low <= high, got {value!r}")
     return lo, hi
+
+
+def check_choice(name: str, value: str, allowed: tuple[str, ...]) -> str:
+    if value not in allowed:
+        raise ValueError(f"unknown {name} {value!r}; allowed: {', '.join(allowed)}")
+    return value
 
 
 def shot_at_goal(
@@ -72,3 +42,20 @@ def shot_at_goal(
     dx, dy = goal_x - position[0], target_y - position[1]
     norm = math.hypot(dx, dy)
     return speed * dx / norm, speed * dy / norm
+
+
+def resting_in_front_of(rng: np.random.Generator, team: str) -> tuple[float, float]:
+    """A ball position at rest in front of ``team``'s keeper."""
+    x = REST_X + float(rng.uniform(-REST_X_JITTER, REST_X_JITTER))
+    y = float(rng.uniform(-REST_Y, REST_Y))
+    return (-x, y) if team == T.HOME else (x, y)
+
+
+def random_shot_start(
+    rng: np.random.Generator, speed_range: tuple[float, float], defender: str = T.HOME
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Block's serve: from x ~ U(0, 0.4), y ~ U(-0.3, 0.3) at ``defender``'s goal."""
+    position = (float(rng.uniform(0.0, 0.4)), float(rng.uniform(-0.3, 0.3)))
+    if defender == T.AWAY:
+        position = (-position[0], -position[1])
+    return position, shot_at_goal(rng, position, speed_range, defender)

@@ -2,12 +2,13 @@
 
 They act on an environment's observation vector through the names of its entries
 (``ObservationBuilder.names``), so one policy works in every task that observes what it needs,
-and on the mirrored observation an opponent gets. They always reason from the home side:
-their own goal at x = -0.60.
+and on the mirrored observation an opponent gets. They always reason from the home side: their
+own goal at x = -0.60, attacking +x. They keep no state between calls.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -15,6 +16,11 @@ import numpy as np
 from foosball_gym import table as T
 
 _WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
+# How far in front of a rod (ball centre minus rod x) a swing of the foot reaches the ball.
+_REACH_NEAR = T.FIGURINE_SIZE[0] / 2 + T.BALL_RADIUS - 0.004
+_REACH_FAR = 0.075
+KICK_ANGLE = math.pi / 2  # spin target of a kick: the feet swing through and end up in front
+WIND_UP_ANGLE = -math.pi / 2  # feet raised behind the rod, clear of the ball
 
 
 def fold_into_walls(y: float, half_width: float = _WALL) -> float:
@@ -42,68 +48,118 @@ def _find(names: Sequence[str], name: str) -> int:
         ) from None
 
 
-class ScriptedKeeper:
-    """A keeper that moves to where the ball will cross its line.
+def _home_rod(name: str) -> T.Rod:
+    """The home rod with the role of ``name``: scripted play always reasons from home."""
+    return T.rod(f"{T.HOME}_{name.split('_', 1)[1]}") if name.startswith(T.AWAY) else T.rod(name)
 
-    When the ball comes towards the goal it predicts the crossing point on the keeper's line
-    (bouncing off the side walls) and slides the figurine there; otherwise it follows the
-    ball's y. With a revolute joint to drive it keeps the figurine upright, and with
-    ``kick=True`` it swings through a ball that lies within reach in front of it.
+
+class ScriptedTeam:
+    """Rods that block, track and kick.
+
+    Each rod slides its nearest figurine to where the ball will cross the rod's line when the
+    ball comes towards it (bouncing off the side walls), and otherwise follows the ball's y.
+    With revolute joints to drive, a rod shoots a slow ball that lies within reach in front of
+    it: it lifts its feet behind it while it lines a figurine up with the ball, then swings
+    through. It lifts its feet when the ball is behind it and moving forward (so its own team's
+    shots pass), and keeps them down otherwise.
 
     Args:
         names: the observation's entry names (``env.unwrapped.obs_builder.names``).
-        n_actions: 1 (prismatic) or 2 (prismatic, revolute).
-        rod: the rod it plays, from its own side (``"home_keeper"``, ``"home_defense"``, ...).
-        kick: shoot balls that stop in front of the rod.
+        rods: the rods it plays, named as in the observation, in action order. An opponent's
+            rods (``away_*`` in its mirrored observation) play as the home rods of that role.
+        joints: ``"slide"`` (one action per rod) or ``"both"`` (slide, spin per rod).
+        kick: shoot balls in reach (only with ``joints="both"``).
     """
 
     def __init__(
-        self, names: Sequence[str], n_actions: int = 1, rod: str = "home_keeper", kick: bool = False
+        self,
+        names: Sequence[str],
+        rods: Sequence[str] = ("home_keeper",),
+        joints: str = "slide",
+        kick: bool = True,
     ) -> None:
-        if n_actions not in (1, 2):
-            raise ValueError(f"n_actions must be 1 or 2, got {n_actions}")
-        self.rod = T.rod(rod)
-        if self.rod.team != T.HOME:
-            raise ValueError("scripted policies reason from the home side; give a home rod")
-        self.n_actions = n_actions
-        self.kick = kick
+        if joints not in ("slide", "both"):
+            raise ValueError(f"joints must be 'slide' or 'both', got {joints!r}")
+        self.rods = tuple(_home_rod(r) for r in rods)
+        self.joints = joints
+        self.kick = kick and joints == "both"
         self._ball = [_find(names, n) for n in ("ball_x", "ball_y", "ball_vx", "ball_vy")]
-        self._phase = 0
+        names = list(names)
+        # The rods' own joint values, where the observation holds them, let a kick wind up.
+        self._own = []
+        for name in rods:
+            slide, spin = f"{name}_slide_pos", f"{name}_spin_pos"
+            ok = slide in names and spin in names
+            self._own.append((names.index(slide), names.index(spin)) if ok else None)
+        self.n_actions = len(self.rods) * (2 if joints == "both" else 1)
 
-    def target_y(self, x: float, y: float, vx: float, vy: float) -> float:
-        """World y where the rod should put its nearest figurine."""
-        if vx < -0.05:
-            cross = crossing_y(x, y, vx, vy, self.rod.x)
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        x, y, vx, vy = (float(obs[i]) for i in self._ball)
+        out = []
+        for rod, own in zip(self.rods, self._own):
+            target = self.target_y(rod, x, y, vx, vy)
+            out.append(slide_for(rod, target) / rod.slide_limit)
+            if self.joints == "both":
+                state = None if own is None else (float(obs[own[0]]), float(obs[own[1]]))
+                out.append(self.spin_for(rod, x, y, vx, vy, state) / T.SPIN_LIMIT)
+        return np.array(out, dtype=np.float32)
+
+    @staticmethod
+    def target_y(rod: T.Rod, x: float, y: float, vx: float, vy: float) -> float:
+        """World y where ``rod`` should put its nearest figurine."""
+        if vx < -0.05 and x > rod.x:
+            cross = crossing_y(x, y, vx, vy, rod.x)
             if cross is not None:
                 return cross
         return y
 
-    def slide_for(self, y: float) -> float:
-        """The prismatic value that brings the figurine nearest to ``y`` onto it."""
-        best = None
-        for off in self.rod.figurine_offsets:
-            s = min(max(y - off, -self.rod.slide_limit), self.rod.slide_limit)
-            miss = abs(s + off - y)
-            if best is None or miss < best[0]:
-                best = (miss, s)
-        return best[1]
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        x, y, vx, vy = (float(obs[i]) for i in self._ball)
-        slide = self.slide_for(self.target_y(x, y, vx, vy)) / self.rod.slide_limit
-        if self.n_actions == 1:
-            return np.array([slide], dtype=np.float32)
-        return np.array([slide, self._spin(x, y, vx)], dtype=np.float32)
-
-    def _spin(self, x: float, y: float, vx: float) -> float:
-        if not self.kick:
-            return 0.0
-        ahead = x - self.rod.x
-        in_reach = 0.0 < ahead < 0.06 and abs(vx) < 1.0
-        if self._phase > 0:
-            self._phase -= 1
-            return 1.0 / 8 if self._phase > 4 else 0.0
-        if in_reach:
-            self._phase = 10
-            return -1.0 / 8
+    def spin_for(
+        self,
+        rod: T.Rod,
+        x: float,
+        y: float,
+        vx: float,
+        vy: float,
+        state: tuple[float, float] | None,
+    ) -> float:
+        ahead = x - rod.x
+        slow = vx * vx + vy * vy < 1.5**2
+        if self.kick and -_REACH_NEAR < ahead < _REACH_FAR and slow:
+            if state is None:
+                return KICK_ANGLE if ahead > _REACH_NEAR else 0.0
+            slide, spin = state
+            aligned = abs(slide - slide_for(rod, y)) < 0.006
+            if aligned and spin < -1.0:
+                return KICK_ANGLE  # wound up behind the rod and lined up: swing through
+            if aligned and abs(spin) < 0.3 and ahead > _REACH_NEAR:
+                return KICK_ANGLE  # feet down, ball clear in front: swing now
+            return WIND_UP_ANGLE  # lift the feet behind the rod while lining up
+        if ahead < -_REACH_NEAR and vx > 0.3 and rod.role != "keeper":
+            return WIND_UP_ANGLE
         return 0.0
+
+
+def slide_for(rod: T.Rod, y: float) -> float:
+    """The prismatic value that brings the figurine of ``rod`` nearest to ``y`` onto it."""
+    best_miss, best = math.inf, 0.0
+    for off in rod.figurine_offsets:
+        s = min(max(y - off, -rod.slide_limit), rod.slide_limit)
+        miss = abs(s + off - y)
+        if miss < best_miss:
+            best_miss, best = miss, s
+    return best
+
+
+class ScriptedKeeper(ScriptedTeam):
+    """The home keeper alone: blocks shots, and kicks balls in reach when it can spin.
+
+    Args:
+        names: the observation's entry names.
+        n_actions: 1 (prismatic) or 2 (prismatic, revolute).
+        kick: swing at balls in reach (with 2 actions).
+    """
+
+    def __init__(self, names: Sequence[str], n_actions: int = 1, kick: bool = True) -> None:
+        if n_actions not in (1, 2):
+            raise ValueError(f"n_actions must be 1 or 2, got {n_actions}")
+        super().__init__(names, ("home_keeper",), "slide" if n_actions == 1 else "both", kick)

@@ -1,0 +1,96 @@
+"""Foosball-FullGame-v0: all eight rods, the whole game."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from foosball_gym import table as T
+from foosball_gym.envs.base import FoosballEnv, Layout, Start
+
+
+class FullGameEnv(FoosballEnv):
+    """The full game: four rods a side.
+
+    ## Description
+    All 8 rods are in play. The learner drives the four home rods (slide and spin each); the
+    opponent, a policy acting on the mirrored observation, drives the four away rods.
+
+    ## Action Space
+    ``Box(-1, 1, (8,), float32)``: for keeper, defense, midfield, offense in turn, the
+    prismatic target (scaled to the rod's range) and the revolute target (±2π rad).
+
+    ## Observation Space
+    ``Box(36,)`` float32:
+
+    | index | content |
+    |---|---|
+    | 0-7 | home keeper, defense, midfield, offense: slide_pos, spin_pos each |
+    | 8-15 | the same rods' slide_vel, spin_vel |
+    | 16-23 | away keeper, defense, midfield, offense: slide_pos, spin_pos each |
+    | 24-31 | the same rods' velocities |
+    | 32-35 | ball_x, ball_y, ball_vx, ball_vy |
+
+    ``opponent_prismatic_only=True`` keeps only the opponent's prismatic joints (28);
+    ``joint_velocities=False`` drops rod velocities; ``observe_figurines=True`` replaces
+    joint values with figurine centres. ``env.unwrapped.obs_builder.names`` lists the entries.
+
+    ## Rewards
+    ``±goal_reward`` (1000) for a goal scored / conceded, ``-out_of_table_penalty`` (1000);
+    no shaping by default (``ball_to_goal_weight`` helps early training).
+
+    ## Starting State
+    Kick-off from a side wall: the ball at (0, ±0.3) rolling towards the centre line with
+    vx ~ ±U(0.25, 1) and |vy| ~ U(1, 2) m/s. All rods centred, feet down.
+
+    ## Episode End
+    Terminated on a goal, when the ball leaves the table, or as a draw when it has lain still
+    for ``stagnation_steps`` (60); truncated after 3600 steps (one minute). With
+    ``continuous=True`` none of these ends the episode: the ball is served again and the score
+    runs on (``info["goals_for"]``, ``info["goals_against"]``) until the time limit, for
+    evaluating whole matches; ``is_success`` is then "ahead on goals".
+
+    ## Arguments
+    ``continuous``, ``opponent`` (default: the scripted team), ``stagnation_steps`` and every
+    keyword of :class:`FoosballEnv`. ``set_opponent(policy)`` swaps the opponent.
+
+    ## Version History
+    - v0: first version.
+    """
+
+    task_options = {"opponent_prismatic_only": (False, True), "continuous": (False, True)}
+
+    def __init__(
+        self, *, continuous: bool = False, stagnation_steps: int = 60, **kwargs: Any
+    ) -> None:
+        if not isinstance(continuous, (bool, np.bool_)):
+            raise ValueError(f"continuous must be True or False, got {continuous!r}")
+        self.continuous = bool(continuous)
+        home = tuple(r.name for r in T.team_rods(T.HOME))
+        away = tuple(r.name for r in T.team_rods(T.AWAY))
+        super().__init__(
+            Layout(controlled=home, joints="both", opponent=away),
+            stagnation_steps=stagnation_steps,
+            **kwargs,
+        )
+
+    def _sample_start(self, ball_position, ball_velocity, options: dict[str, Any]) -> Start:
+        rng = self.np_random
+        side = 1.0 if rng.random() < 0.5 else -1.0
+        position = (0.0, 0.3 * side)
+        vx = float(rng.uniform(0.25, 1.0)) * (1.0 if rng.random() < 0.5 else -1.0)
+        velocity = (vx, -side * float(rng.uniform(1.0, 2.0)))
+        if ball_position is not None:
+            position = ball_position
+        if ball_velocity is not None:
+            velocity = ball_velocity
+        return Start([0.0] * 8, [0.0] * 8, position, velocity)
+
+    def _is_success(self) -> bool:
+        if self.continuous:
+            return self._goals_for > self._goals_against
+        return self._goals_for > 0
+
+    def _continues_after_goal(self) -> bool:
+        return self.continuous

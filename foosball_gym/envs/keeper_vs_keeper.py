@@ -1,0 +1,90 @@
+"""Foosball-KeeperVsKeeper-v0: the two keepers play each other."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from foosball_gym import table as T
+from foosball_gym.envs.base import FoosballEnv, Layout, Start
+from foosball_gym.envs.common import resting_in_front_of
+
+
+class KeeperVsKeeperEnv(FoosballEnv):
+    """Keeper against keeper, the game the paper's real table can play today.
+
+    ## Description
+    Only the two keepers are in play. The learner drives the home keeper (slide and spin); the
+    opponent, a policy acting on the mirrored observation, drives the away keeper. The paper
+    trains this task by self-play (``foosball_gym.training.SelfPlayCallback``).
+
+    ## Action Space
+    ``Box(-1, 1, (2,), float32)``: home keeper prismatic target (±0.123 m) and revolute
+    target (±2π rad).
+
+    ## Observation Space
+    ``Box(10,)`` float32 by default (the opponent seen only along its prismatic joint, as
+    the real table's camera sees it):
+
+    | index | name | unit |
+    |---|---|---|
+    | 0 | home_keeper_slide_pos | m |
+    | 1 | home_keeper_spin_pos | rad |
+    | 2 | home_keeper_slide_vel | m/s |
+    | 3 | home_keeper_spin_vel | rad/s |
+    | 4 | away_keeper_slide_pos | m |
+    | 5 | away_keeper_slide_vel | m/s |
+    | 6-9 | ball_x, ball_y, ball_vx, ball_vy | m, m/s |
+
+    ``opponent_prismatic_only=False`` adds the opponent's spin position and velocity (12);
+    ``joint_velocities=False`` drops every rod velocity; ``observe_figurines=True`` replaces
+    joint values with figurine centres. ``env.unwrapped.obs_builder.names`` lists the entries.
+
+    ## Rewards
+    ``±goal_reward`` (1000) for a goal scored / conceded, ``-out_of_table_penalty`` (1000);
+    no shaping by default.
+
+    ## Starting State
+    The ball lies still in front of a keeper chosen at random: x = ±(0.497 ± 0.005),
+    y ~ U(-0.1, 0.1). Both keepers start centred (or just beside the ball).
+
+    ## Episode End
+    Terminated on a goal, when the ball leaves the table, or as a draw when the ball has lain
+    still for ``stagnation_steps`` (60, one second); truncated after 1800 steps (30 s).
+    ``info``: ``is_success`` (the learner scored), ``goal``, ``goals_for``,
+    ``goals_against``, ``stagnated``.
+
+    ## Arguments
+    ``opponent`` (default: the scripted keeper), ``stagnation_steps`` and every keyword of
+    :class:`FoosballEnv`. ``set_opponent(policy)`` swaps the opponent between episodes.
+
+    ## Version History
+    - v0: first version.
+    """
+
+    task_options = {"opponent_prismatic_only": (True, False)}
+
+    def __init__(
+        self,
+        *,
+        opponent_prismatic_only: bool = True,
+        stagnation_steps: int = 60,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(
+            Layout(controlled=("home_keeper",), joints="both", opponent=("away_keeper",)),
+            opponent_prismatic_only=opponent_prismatic_only,
+            stagnation_steps=stagnation_steps,
+            **kwargs,
+        )
+
+    def _sample_start(self, ball_position, ball_velocity, options: dict[str, Any]) -> Start:
+        rng = self.np_random
+        team = T.HOME if rng.random() < 0.5 else T.AWAY
+        position = resting_in_front_of(rng, team)
+        if ball_position is not None:
+            position = ball_position
+        velocity = (0.0, 0.0) if ball_velocity is None else ball_velocity
+        return Start([0.0, 0.0], [0.0, 0.0], position, velocity)
+
+    def _is_success(self) -> bool:
+        return self._goals_for > 0

@@ -1,0 +1,156 @@
+"""Every registered id, with every combination of its options, passes both env checkers and
+has the observation its docstring promises."""
+
+from __future__ import annotations
+
+import inspect
+import itertools
+
+import gymnasium as gym
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+
+from foosball_gym import ENV_IDS
+from foosball_gym.envs.base import FoosballEnv
+
+
+def grid_cases():
+    for env_id in ENV_IDS:
+        grid = gym.envs.registration.load_env_creator(gym.spec(env_id).entry_point).option_grid()
+        for values in itertools.product(*grid.values()):
+            yield pytest.param(
+                env_id,
+                dict(zip(grid, values)),
+                id=f"{env_id}-" + "-".join(f"{k}={v}" for k, v in zip(grid, values)),
+            )
+
+
+@pytest.mark.parametrize("env_id, kwargs", list(grid_cases()))
+def test_both_checkers_pass_for_every_option_combination(env_id, kwargs):
+    sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
+    env = gym.make(env_id, **kwargs)
+    try:
+        gym_check_env(env.unwrapped, skip_render_check=True)
+        sb3_checker.check_env(env, warn=True)
+        assert env.observation_space.shape == (len(env.unwrapped.obs_builder.names),)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_the_grid_names_every_discrete_option_of_the_constructor(env_id):
+    """A new boolean or choice argument cannot be left out of the tested grid."""
+    env = gym.make(env_id)
+    cls, has_opponent = type(env.unwrapped), bool(env.unwrapped.layout.opponent)
+    env.close()
+    grid = cls.option_grid()
+    params = {
+        **inspect.signature(FoosballEnv.__init__).parameters,
+        **inspect.signature(cls.__init__).parameters,
+    }
+    flags = {name for name, p in params.items() if isinstance(p.default, bool)}
+    if not has_opponent:
+        flags.discard("opponent_prismatic_only")  # rejected where there is no opponent
+    assert flags <= set(grid)
+    for name, values in grid.items():
+        assert params[name].default == values[0], name
+
+
+@pytest.mark.parametrize(
+    "env_id, kwargs, size",
+    [
+        ("Foosball-Block-v0", {}, 6),
+        ("Foosball-Block-v0", {"joint_velocities": False}, 5),
+        ("Foosball-Score-v0", {}, 8),
+        ("Foosball-Score-v0", {"obstacles": True}, 11),
+        ("Foosball-Score-v0", {"joint_velocities": False}, 6),
+        ("Foosball-KeeperVsKeeper-v0", {}, 10),
+        ("Foosball-KeeperVsKeeper-v0", {"opponent_prismatic_only": False}, 12),
+        ("Foosball-FullGame-v0", {}, 36),
+        ("Foosball-FullGame-v0", {"opponent_prismatic_only": True}, 28),
+        ("Foosball-FullGame-v0", {"joint_velocities": False}, 20),
+        ("Foosball-FullGame-v0", {"observe_figurines": True}, 4 * 11 * 2 + 4),
+    ],
+)
+def test_observation_sizes_follow_the_options(env_id, kwargs, size):
+    env = gym.make(env_id, **kwargs)
+    try:
+        assert env.observation_space.shape == (size,)
+        assert env.reset(seed=0)[0].shape == (size,)
+    finally:
+        env.close()
+
+
+def test_keeper_vs_keeper_layout_is_the_papers():
+    env = gym.make("Foosball-KeeperVsKeeper-v0")
+    try:
+        assert env.unwrapped.obs_builder.names == (
+            "home_keeper_slide_pos",
+            "home_keeper_spin_pos",
+            "home_keeper_slide_vel",
+            "home_keeper_spin_vel",
+            "away_keeper_slide_pos",
+            "away_keeper_slide_vel",
+            "ball_x",
+            "ball_y",
+            "ball_vx",
+            "ball_vy",
+        )
+        assert env.action_space.shape == (2,)
+    finally:
+        env.close()
+
+
+def test_score_obstacle_positions_are_appended_after_the_ball(make_env):
+    env = make_env("Foosball-Score-v0", obstacles=True)
+    obs, _ = env.reset(seed=0, options={"obstacle_positions": (0.1, -0.05, 0.02)})
+    assert env.unwrapped.obs_builder.names[-3:] == (
+        "away_keeper_slide_pos",
+        "away_defense_slide_pos",
+        "away_offense_slide_pos",
+    )
+    assert obs[-3:] == pytest.approx([0.1, -0.05, 0.02], abs=1e-6)
+    for _ in range(30):  # they stay where they were put
+        obs, *_ = env.step(env.action_space.sample())
+    assert obs[-3:] == pytest.approx([0.1, -0.05, 0.02], abs=2e-3)
+
+
+def test_figurine_observation_follows_the_rod(make_env):
+    env = make_env("Foosball-Block-v0", observe_figurines=True)
+    obs, _ = env.reset(options={"ball_position": (0.3, 0.2), "ball_velocity": (0.0, 0.0)})
+    names = env.unwrapped.obs_builder.names
+    assert names[:4] == (
+        "home_keeper_figurine_0_x",
+        "home_keeper_figurine_0_y",
+        "home_keeper_figurine_0_vx",
+        "home_keeper_figurine_0_vy",
+    )
+    for _ in range(20):
+        obs, *_ = env.step([0.5])
+    assert obs[0] == pytest.approx(-0.522, abs=1e-3)
+    assert obs[1] == pytest.approx(0.5 * 0.123, abs=2e-3)
+
+
+@pytest.mark.parametrize(
+    "env_id, kwargs, message",
+    [
+        ("Foosball-Score-v0", {"ball_start": "flying"}, "resting, incoming"),
+        ("Foosball-Score-v0", {"obstacles": "yes"}, "True or False"),
+        ("Foosball-Block-v0", {"opponent_prismatic_only": True}, "only to tasks with an opponent"),
+        ("Foosball-FullGame-v0", {"continuous": 1}, "True or False"),
+        ("Foosball-KeeperVsKeeper-v0", {"stagnation_steps": -1}, "non-negative"),
+        ("Foosball-KeeperVsKeeper-v0", {"opponent": "scripted"}, "callable"),
+    ],
+)
+def test_invalid_arguments_say_what_is_allowed(env_id, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        gym.make(env_id, **kwargs)
+
+
+def test_bad_obstacle_positions_are_rejected(make_env):
+    env = make_env("Foosball-Score-v0", obstacles=True)
+    with pytest.raises(ValueError, match="three prismatic values"):
+        env.reset(options={"obstacle_positions": (0.5, 0.0, 0.0)})
+    plain = make_env("Foosball-Score-v0")
+    with pytest.raises(ValueError, match="obstacles=True"):
+        plain.reset(options={"obstacle_positions": (0.0, 0.0, 0.0)})

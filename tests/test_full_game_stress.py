@@ -1,0 +1,43 @@
+"""100,000 random-action steps of the full game: the physics stays sane."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+
+from foosball_gym import table as T
+
+STEPS = 100_000
+# A figurine can squeeze the ball against a wall or the floor with its drive's full force, so
+# the ball may sink in a little; "outside" means its centre crossed the wall or the surface.
+SINK = T.BALL_RADIUS / 2
+
+
+def test_full_game_with_random_actions_keeps_the_ball_on_the_table():
+    env = gym.make("Foosball-FullGame-v0")
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (STEPS, 8)).astype(np.float32)
+    sim = env.unwrapped.sim
+    episodes = goals = outs = 0
+    try:
+        env.reset(seed=0)
+        for a in actions:
+            obs, reward, terminated, truncated, info = env.step(a)
+            assert np.isfinite(obs).all() and np.isfinite(reward)
+            x, y, z = sim.ball_state().position
+            if not info["out_of_table"]:
+                assert z >= T.BALL_RADIUS - SINK, (x, y, z)
+                assert abs(y) <= T.FIELD_HALF_WIDTH - T.BALL_RADIUS + SINK, (x, y, z)
+                in_mouth = abs(y) <= T.GOAL_HALF_WIDTH
+                limit = T.POCKET_BACK_X if in_mouth else T.FIELD_HALF_LENGTH
+                assert abs(x) <= limit - T.BALL_RADIUS + SINK, (x, y, z)
+                if abs(x) > T.GOAL_LINE_X:
+                    assert info["goal"] != 0  # past the goal line only through the goal
+            goals += info["goal"] != 0
+            outs += info["out_of_table"]
+            if terminated or truncated:
+                episodes += 1
+                env.reset()
+    finally:
+        env.close()
+    assert episodes > 10 and goals > 0
