@@ -40,19 +40,24 @@ def _libc_fflush() -> None:
 
 @contextlib.contextmanager
 def _quiet_stdout() -> Iterator[None]:
-    """Silence what Bullet's C++ code prints on stdout (URDF merge notes, build time)."""
-    fd = 1  # the process's stdout, also when Python's sys.stdout is captured or replaced
+    """Silence what Bullet's C++ code prints (build time, URDF merge notes) on fds 1 and 2.
+
+    Failures still surface: pybullet raises an exception for anything that goes wrong.
+    """
     with contextlib.suppress(Exception):
         sys.stdout.flush()
-    saved = os.dup(fd)
+        sys.stderr.flush()
+    saved = [os.dup(fd) for fd in (1, 2)]
     try:
         with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), fd)
+            for fd in (1, 2):
+                os.dup2(devnull.fileno(), fd)
         yield
     finally:
         _libc_fflush()
-        os.dup2(saved, fd)
-        os.close(saved)
+        for fd, copy in zip((1, 2), saved):
+            os.dup2(copy, fd)
+            os.close(copy)
 
 
 with _quiet_stdout():

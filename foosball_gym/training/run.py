@@ -1,0 +1,423 @@
+"""A training run: configuration, environments, model, callbacks, checkpoints, resume.
+
+A run directory holds::
+
+    config.json            the resolved configuration (what --resume reads back)
+    model.zip              the final model (SB3)
+    vecnormalize.pkl       observation-normalisation statistics, if used
+    checkpoints/           periodic checkpoints, written atomically; latest.json names the last
+    eval.csv, eval.png     the evaluation curve: success rate and reward against timesteps
+    tb/                    TensorBoard logs
+    selfplay/              opponent snapshots and history.json (self-play runs)
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch as th
+from stable_baselines3 import PPO, SAC
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+
+import foosball_gym  # noqa: F401  (registers the ids)
+from foosball_gym.training.evaluation import evaluate
+from foosball_gym.training.selfplay import OpponentActionWrapper, SelfPlayCallback, SelfPlayVecEnv
+from foosball_gym.training.snapshot import PolicySnapshot
+
+ALGOS = {"ppo": PPO, "sac": SAC}
+VEC_ENVS = {"dummy": DummyVecEnv, "subproc": SubprocVecEnv}
+CONFIG_FILE = "config.json"
+MODEL_FILE = "model.zip"
+NORM_FILE = "vecnormalize.pkl"
+
+
+@dataclass
+class TrainConfig:
+    """Everything a run needs; the defaults are the paper's PPO settings sized for a CPU.
+
+    The paper used 8192 GPU environments with a horizon of 16; here 8 environments in one
+    process with a horizon of 128 give updates of 1024 samples, in minibatches of 256.
+    """
+
+    env_id: str
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    algo: str = "ppo"
+    timesteps: int = 500_000
+    n_envs: int = 8
+    seed: int = 0
+    self_play: bool | None = None  # None: on for two-player environments
+    normalize: bool = True
+    vec_env: str = "dummy"
+    net_arch: tuple[int, ...] = (256, 128, 64)
+    learning_rate: float = 1e-3
+    gamma: float = 0.99
+    n_steps: int = 128
+    batch_size: int = 256
+    n_epochs: int = 8
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    selfplay_window: int = 100
+    selfplay_threshold: float = 0.2
+    selfplay_pool: int = 1
+    eval_freq: int = 10_000
+    eval_episodes: int = 50
+    checkpoint_freq: int = 50_000
+    target_success: float | None = None  # stop once an evaluation reaches this success rate
+    torch_threads: int = 1
+
+    def check(self) -> None:
+        """Raise ValueError with what is allowed for anything out of range."""
+        if self.env_id not in gym.registry:
+            known = ", ".join(foosball_gym.ENV_IDS)
+            raise ValueError(f"unknown environment {self.env_id!r}; registered: {known}")
+        if self.algo not in ALGOS:
+            raise ValueError(f"unknown algorithm {self.algo!r}; allowed: {', '.join(ALGOS)}")
+        if self.vec_env not in VEC_ENVS:
+            raise ValueError(f"unknown vec_env {self.vec_env!r}; allowed: {', '.join(VEC_ENVS)}")
+        for name in (
+            "timesteps",
+            "n_envs",
+            "n_steps",
+            "batch_size",
+            "n_epochs",
+            "eval_freq",
+            "eval_episodes",
+            "checkpoint_freq",
+            "selfplay_window",
+            "selfplay_pool",
+            "torch_threads",
+        ):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if self.target_success is not None and not 0 < self.target_success <= 1:
+            raise ValueError(f"target_success must lie in (0, 1], got {self.target_success}")
+        env = gym.make(self.env_id, **self.env_kwargs)  # raises on a bad env option
+        two_player = bool(env.unwrapped.layout.opponent)
+        env.close()
+        if self.self_play and not two_player:
+            raise ValueError(f"{self.env_id} has no opponent; self-play needs a two-player task")
+        if self.self_play is None:
+            self.self_play = two_player
+
+    def save(self, path: Path) -> None:
+        _atomic_write_text(path, json.dumps(asdict(self), indent=2))
+
+    @classmethod
+    def load(cls, path: Path) -> TrainConfig:
+        data = json.loads(Path(path).read_text())
+        names = {f.name for f in fields(cls)}
+        config = cls(**{k: v for k, v in data.items() if k in names})
+        config.net_arch = tuple(config.net_arch)
+        return config
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
+def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
+    """The vectorised training envs (with self-play and normalisation wrappers as configured)."""
+    wrapper = OpponentActionWrapper if config.self_play else None
+    venv = make_vec_env(
+        config.env_id,
+        n_envs=config.n_envs,
+        seed=config.seed + seed_offset,
+        env_kwargs=config.env_kwargs,
+        wrapper_class=wrapper,
+        vec_env_cls=VEC_ENVS[config.vec_env],
+    )
+    if config.self_play:
+        # The first opponent is replaced by a snapshot of the learner as training starts.
+        n = venv.action_space.shape[0] // 2
+        venv = SelfPlayVecEnv(venv, lambda obs: np.zeros((len(obs), n), np.float32), config.seed)
+    if config.normalize:
+        venv = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=config.gamma)
+    return venv
+
+
+def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
+    policy_kwargs = {"net_arch": list(config.net_arch)}
+    common = {
+        "learning_rate": config.learning_rate,
+        "gamma": config.gamma,
+        "seed": config.seed,
+        "device": "cpu",
+        "verbose": 0,
+        "tensorboard_log": None if tb_dir is None else str(tb_dir),
+    }
+    if config.algo == "ppo":
+        return PPO(
+            "MlpPolicy",
+            venv,
+            n_steps=config.n_steps,
+            batch_size=config.batch_size,
+            n_epochs=config.n_epochs,
+            gae_lambda=config.gae_lambda,
+            clip_range=config.clip_range,
+            policy_kwargs=policy_kwargs,
+            **common,
+        )
+    return SAC(
+        "MlpPolicy", venv, batch_size=config.batch_size, policy_kwargs=policy_kwargs, **common
+    )
+
+
+class EvalCurveCallback(BaseCallback):
+    """Every ``eval_freq`` steps: evaluate on seeded episodes, append to eval.csv, plot."""
+
+    FIELDS = (
+        "timesteps",
+        "wall_seconds",
+        "success_rate",
+        "ci_low",
+        "ci_high",
+        "mean_reward",
+        "mean_length",
+        "goals_for",
+        "goals_against",
+    )
+
+    def __init__(self, config: TrainConfig, out: Path, wall_offset: float = 0.0) -> None:
+        super().__init__()
+        self.config = config
+        self.csv = out / "eval.csv"
+        self.png = out / "eval.png"
+        self.wall_offset = wall_offset
+        self._start = time.perf_counter()
+        self._next = 0
+        self.reached: dict[str, float] | None = None
+
+    def _on_training_start(self) -> None:
+        self._start = time.perf_counter()
+        self._next = (self.num_timesteps // self.config.eval_freq + 1) * self.config.eval_freq
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps < self._next:
+            return True
+        self._next += self.config.eval_freq
+        return self.run_eval()
+
+    def run_eval(self) -> bool:
+        policy = PolicySnapshot.of_model(self.model)
+        res = evaluate(
+            policy,
+            self.config.env_id,
+            self.config.env_kwargs,
+            episodes=self.config.eval_episodes,
+            seed=1_000_000,
+        )
+        row = {
+            "timesteps": self.num_timesteps,
+            "wall_seconds": round(self.wall_offset + time.perf_counter() - self._start, 2),
+            "success_rate": res.success_rate,
+            "ci_low": round(res.ci_low, 4),
+            "ci_high": round(res.ci_high, 4),
+            "mean_reward": round(res.mean_reward, 3),
+            "mean_length": res.mean_length,
+            "goals_for": res.goals_for,
+            "goals_against": res.goals_against,
+        }
+        new = not self.csv.exists()
+        with self.csv.open("a", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=self.FIELDS)
+            if new:
+                writer.writeheader()
+            writer.writerow(row)
+        self.logger.record("eval/success_rate", res.success_rate)
+        self.logger.record("eval/mean_reward", res.mean_reward)
+        plot_curve(self.csv, self.png, self.config.env_id)
+        target = self.config.target_success
+        if target is not None and res.success_rate >= target:
+            self.reached = row
+            return False
+        return True
+
+
+def read_curve(csv_path: Path) -> list[dict[str, float]]:
+    with Path(csv_path).open() as f:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def plot_curve(csv_path: Path, png_path: Path, title: str) -> None:
+    """Success rate (with its 95 % interval) and mean reward against timesteps, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = read_curve(csv_path)
+    t = [r["timesteps"] for r in rows]
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(6, 5), sharex=True)
+    ax1.plot(t, [100 * r["success_rate"] for r in rows], marker="o", ms=3)
+    ax1.fill_between(
+        t, [100 * r["ci_low"] for r in rows], [100 * r["ci_high"] for r in rows], alpha=0.2
+    )
+    ax1.set_ylabel("success rate (%)")
+    ax1.set_ylim(-2, 102)
+    ax1.grid(alpha=0.3)
+    ax1.set_title(title)
+    ax2.plot(t, [r["mean_reward"] for r in rows], color="tab:orange", marker="o", ms=3)
+    ax2.set_ylabel("mean episode reward")
+    ax2.set_xlabel("timesteps")
+    ax2.grid(alpha=0.3)
+    fig.tight_layout()
+    tmp = png_path.with_name(png_path.name + ".tmp.png")
+    fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    tmp.replace(png_path)
+
+
+class CheckpointCallback(BaseCallback):
+    """Every ``every`` steps write model, normalisation and a pointer to them, atomically."""
+
+    def __init__(self, out: Path, every: int) -> None:
+        super().__init__()
+        self.dir = out / "checkpoints"
+        self.every = every
+        self._next = 0
+
+    def _on_training_start(self) -> None:
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self._next = (self.num_timesteps // self.every + 1) * self.every
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self._next:
+            self._next += self.every
+            self.write()
+        return True
+
+    def write(self) -> None:
+        name = f"model_{self.num_timesteps:010d}"
+        save_model(self.model, self.dir / f"{name}.zip", self.dir / f"{name}_{NORM_FILE}")
+        pointer = {"model": f"{name}.zip", "timesteps": int(self.num_timesteps)}
+        if self.model.get_vec_normalize_env() is not None:
+            pointer["vecnormalize"] = f"{name}_{NORM_FILE}"
+        _atomic_write_text(self.dir / "latest.json", json.dumps(pointer))
+
+
+def save_model(model: Any, path: Path, norm_path: Path) -> None:
+    """Save the model (and its VecNormalize statistics) through a temporary file each."""
+    tmp = path.with_name(path.stem + ".tmp.zip")
+    model.save(tmp)
+    tmp.replace(path)
+    norm = model.get_vec_normalize_env()
+    if norm is not None:
+        tmp_norm = norm_path.with_name(norm_path.name + ".tmp")
+        norm.save(tmp_norm)
+        tmp_norm.replace(norm_path)
+
+
+@dataclass
+class TrainResult:
+    out: Path
+    timesteps: int
+    seconds: float
+    reached: dict[str, float] | None
+
+
+def train(
+    config: TrainConfig,
+    out: str | Path,
+    progress_bar: bool = False,
+    resume: bool = False,
+    callbacks: list[BaseCallback] | None = None,
+) -> TrainResult:
+    """Train (or, with ``resume``, continue) the run in directory ``out``.
+
+    Args:
+        config: the run's configuration (ignored with ``resume``: the run's own is read).
+        out: the run directory.
+        progress_bar: show SB3's progress bar.
+        resume: continue from the last checkpoint in ``out``.
+        callbacks: extra SB3 callbacks, run after the run's own.
+    """
+    out = Path(out)
+    th.set_num_threads(config.torch_threads)
+    if resume:
+        config = TrainConfig.load(out / CONFIG_FILE)
+    config.check()
+    out.mkdir(parents=True, exist_ok=True)
+    if not resume:
+        if (out / CONFIG_FILE).exists():
+            raise ValueError(
+                f"{out} already holds a run; use --resume to continue it or choose another --out"
+            )
+        config.save(out / CONFIG_FILE)
+
+    venv = make_env(config)
+    done_steps, wall_offset = 0, 0.0
+    if resume:
+        model, done_steps = _load_checkpoint(config, out, venv)
+        if (out / "eval.csv").exists():
+            rows = read_curve(out / "eval.csv")
+            wall_offset = rows[-1]["wall_seconds"] if rows else 0.0
+    else:
+        model = build_model(config, venv, out / "tb")
+
+    own: list[BaseCallback] = [CheckpointCallback(out, config.checkpoint_freq)]
+    if config.self_play:
+        own.append(
+            SelfPlayCallback(
+                window=config.selfplay_window,
+                threshold=config.selfplay_threshold,
+                pool_size=config.selfplay_pool,
+                save_dir=out / "selfplay",
+                verbose=1,
+            )
+        )
+    curve = EvalCurveCallback(config, out, wall_offset)
+    own.append(curve)
+
+    start = time.perf_counter()
+    remaining = max(config.timesteps - done_steps, 0)
+    if remaining:
+        model.learn(
+            remaining,
+            callback=CallbackList(own + list(callbacks or [])),
+            progress_bar=progress_bar,
+            reset_num_timesteps=not resume,
+            tb_log_name="run",
+        )
+    rows = read_curve(out / "eval.csv") if (out / "eval.csv").exists() else []
+    if curve.reached is None and (not rows or rows[-1]["timesteps"] < model.num_timesteps):
+        curve.init_callback(model)  # a last point for the curve at the final timestep
+        curve.run_eval()
+    save_model(model, out / MODEL_FILE, out / NORM_FILE)
+    venv.close()
+    return TrainResult(out, int(model.num_timesteps), time.perf_counter() - start, curve.reached)
+
+
+def _load_checkpoint(config: TrainConfig, out: Path, venv: Any) -> tuple[Any, int]:
+    pointer_file = out / "checkpoints" / "latest.json"
+    if not pointer_file.exists():
+        raise ValueError(f"{out} has no checkpoint to resume from (no checkpoints/latest.json)")
+    pointer = json.loads(pointer_file.read_text())
+    if "vecnormalize" in pointer and isinstance(venv, VecNormalize):
+        saved = VecNormalize.load(str(out / "checkpoints" / pointer["vecnormalize"]), venv.venv)
+        venv.obs_rms, venv.ret_rms = saved.obs_rms, saved.ret_rms
+    model = ALGOS[config.algo].load(
+        out / "checkpoints" / pointer["model"],
+        env=venv,
+        device="cpu",
+        tensorboard_log=str(out / "tb"),
+    )
+    return model, int(pointer["timesteps"])
+
+
+def env_is_two_player(env_id: str, env_kwargs: dict[str, Any] | None = None) -> bool:
+    env = gym.make(env_id, **(env_kwargs or {}))
+    try:
+        return bool(env.unwrapped.layout.opponent)
+    finally:
+        env.close()

@@ -1,0 +1,251 @@
+"""Self-play for Stable-Baselines3 (SPEC §4): the learner plays frozen past copies of itself.
+
+Three pieces:
+
+- :class:`OpponentActionWrapper` (per env): the vectorised env, not the env, chooses the
+  opponent's action. The env's action becomes ``[learner action, opponent action]`` and its
+  info carries the opponent's (mirrored) observation.
+- :class:`SelfPlayVecEnv` (around the Dummy/SubprocVecEnv): before each step it evaluates the
+  opponents for all envs in one batched forward pass per opponent, then steps the envs.
+- :class:`SelfPlayCallback`: counts finished games, replaces the opponent by a snapshot of the
+  learner when the learner's net score over the last ``window`` games exceeds ``threshold``,
+  optionally keeps a pool of the last ``pool_size`` snapshots sampled per episode, logs to the
+  SB3 logger and saves every snapshot so a run can be resumed and its history inspected.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+
+from foosball_gym.training.snapshot import PolicySnapshot
+
+OPPONENT_OBS = "opponent_obs"
+
+
+class _QueuedAction:
+    """The opponent 'policy' of an env whose opponent is chosen outside it."""
+
+    def __init__(self, size: int) -> None:
+        self.action = np.zeros(size, dtype=np.float32)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return self.action
+
+
+class OpponentActionWrapper(gym.Wrapper):
+    """Takes the opponent's action together with the learner's.
+
+    The action space is the learner's followed by the opponent's (same size); each step's and
+    reset's info holds ``info["opponent_obs"]``, the observation the opponent acts on next.
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        base = env.unwrapped
+        if not getattr(base, "layout", None) or not base.layout.opponent:
+            raise ValueError(f"{base.spec.id if base.spec else base} has no opponent to play")
+        own = env.action_space
+        self._n = own.shape[0]
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2 * self._n,), dtype=np.float32)
+        self._queued = _QueuedAction(self._n)
+        base.set_opponent(self._queued)
+
+    def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        info[OPPONENT_OBS] = self.env.unwrapped.opponent_observation()
+        return obs, info
+
+    def step(self, action: np.ndarray):
+        self._queued.action = np.asarray(action[self._n :], dtype=np.float32)
+        obs, reward, terminated, truncated, info = self.env.step(action[: self._n])
+        info[OPPONENT_OBS] = self.env.unwrapped.opponent_observation()
+        return obs, reward, terminated, truncated, info
+
+
+class SelfPlayVecEnv(VecEnvWrapper):
+    """Plays the opponents of every env of a VecEnv built with :class:`OpponentActionWrapper`.
+
+    Args:
+        venv: the vectorised envs (each wrapped in ``OpponentActionWrapper``).
+        opponent: the first opponent (a callable on a batch of observations).
+        seed: seeds the choice of opponents from the pool.
+    """
+
+    def __init__(self, venv: VecEnv, opponent: Any, seed: int | None = None) -> None:
+        n = venv.action_space.shape[0] // 2
+        learner_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
+        super().__init__(venv, action_space=learner_space)
+        self.pool: list[Any] = [opponent]
+        self._rng = np.random.default_rng(seed)
+        self._assigned = np.zeros(self.num_envs, dtype=int)
+        self._opp_obs: np.ndarray | None = None
+        self.opponent_seconds = 0.0  # time spent in opponent inference, for benchmarks
+
+    # -- pool ---------------------------------------------------------------
+
+    def set_pool(self, pool: list[Any]) -> None:
+        """Replace the opponents; envs draw from the new pool at their next episode."""
+        if not pool:
+            raise ValueError("the opponent pool must not be empty")
+        self.pool = list(pool)
+        self._assigned = np.minimum(self._assigned, len(self.pool) - 1)
+
+    def _draw(self) -> int:
+        return int(self._rng.integers(len(self.pool)))
+
+    # -- VecEnv -------------------------------------------------------------
+
+    def reset(self) -> np.ndarray:
+        obs = self.venv.reset()
+        self._opp_obs = np.stack([info[OPPONENT_OBS] for info in self.venv.reset_infos])
+        self._assigned = np.array([self._draw() for _ in range(self.num_envs)])
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        start = time.perf_counter()
+        opp = np.zeros_like(actions, dtype=np.float32)
+        for k in np.unique(self._assigned):
+            idx = np.nonzero(self._assigned == k)[0]
+            opp[idx] = self.pool[k](self._opp_obs[idx])
+        self.opponent_seconds += time.perf_counter() - start
+        self.venv.step_async(np.concatenate([actions, opp], axis=1))
+
+    def step_wait(self):
+        obs, rewards, dones, infos = self.venv.step_wait()
+        for i, done in enumerate(dones):
+            if done:
+                self._opp_obs[i] = self.venv.reset_infos[i][OPPONENT_OBS]
+                self._assigned[i] = self._draw()
+            else:
+                self._opp_obs[i] = infos[i][OPPONENT_OBS]
+        return obs, rewards, dones, infos
+
+
+def game_result(info: dict[str, Any]) -> int:
+    """+1 won, -1 lost, 0 drawn, from the info of a game's last step."""
+    diff = info.get("goals_for", 0) - info.get("goals_against", 0)
+    return int(np.sign(diff))
+
+
+def find_selfplay_env(env: VecEnv) -> SelfPlayVecEnv:
+    while env is not None and not isinstance(env, SelfPlayVecEnv):
+        env = getattr(env, "venv", None)
+    if env is None:
+        raise ValueError("self-play needs the training env wrapped in SelfPlayVecEnv")
+    return env
+
+
+class SelfPlayCallback(BaseCallback):
+    """Replace the opponent by the learner when the learner beats it (SPEC §4).
+
+    Args:
+        window: games the net score is taken over (100).
+        threshold: net score, (wins - losses) / games, above which the opponent is replaced
+            (0.2).
+        pool_size: keep the last this many snapshots and draw each episode's opponent from them
+            (1: always the latest).
+        save_dir: where snapshots (``opponent_<generation>.pt``) and ``history.json`` go; None
+            keeps nothing on disk.
+        verbose: 1 prints each replacement.
+    """
+
+    def __init__(
+        self,
+        window: int = 100,
+        threshold: float = 0.2,
+        pool_size: int = 1,
+        save_dir: str | Path | None = None,
+        verbose: int = 0,
+    ) -> None:
+        super().__init__(verbose)
+        if window < 1:
+            raise ValueError(f"window must be at least 1 game, got {window}")
+        if not -1.0 <= threshold < 1.0:
+            raise ValueError(f"threshold must lie in [-1, 1), got {threshold}")
+        if pool_size < 1:
+            raise ValueError(f"pool_size must be at least 1, got {pool_size}")
+        self.window = window
+        self.threshold = threshold
+        self.pool_size = pool_size
+        self.save_dir = None if save_dir is None else Path(save_dir)
+        self.results: deque[int] = deque(maxlen=window)
+        self.pool: list[PolicySnapshot] = []
+        self.history: list[dict[str, Any]] = []
+        self.games = 0
+        self._env: SelfPlayVecEnv | None = None
+
+    @property
+    def generation(self) -> int:
+        return self.pool[-1].generation if self.pool else 0
+
+    def _on_training_start(self) -> None:
+        self._env = find_selfplay_env(self.model.get_env())
+        if (
+            not self.pool
+            and self.save_dir is not None
+            and (self.save_dir / "history.json").exists()
+        ):
+            self._restore()
+        if not self.pool:
+            self._add_snapshot(net_score=None)
+        self._env.set_pool(self.pool)
+
+    def _on_step(self) -> bool:
+        for done, info in zip(self.locals["dones"], self.locals["infos"]):
+            if done:
+                self.results.append(game_result(info))
+                self.games += 1
+        if self.results:
+            res = np.array(self.results)
+            net = float(res.mean())
+            self.logger.record("selfplay/generation", self.generation)
+            self.logger.record("selfplay/win_rate", float((res > 0).mean()))
+            self.logger.record("selfplay/loss_rate", float((res < 0).mean()))
+            self.logger.record("selfplay/draw_rate", float((res == 0).mean()))
+            self.logger.record("selfplay/net_score", net)
+            self.logger.record("selfplay/games", self.games)
+            if len(self.results) == self.window and net > self.threshold:
+                self._add_snapshot(net_score=net)
+                self._env.set_pool(self.pool)
+                self.results.clear()
+        return True
+
+    def _add_snapshot(self, net_score: float | None) -> None:
+        generation = self.generation + 1 if self.pool else 0
+        snap = PolicySnapshot.of_model(self.model, generation=generation)
+        self.pool = (self.pool + [snap])[-self.pool_size :]
+        record = {
+            "generation": generation,
+            "timesteps": int(self.num_timesteps),
+            "games": self.games,
+            "net_score": net_score,
+        }
+        self.history.append(record)
+        if self.verbose and net_score is not None:
+            print(
+                f"self-play: opponent replaced by generation {generation} at "
+                f"{self.num_timesteps} steps (net score {net_score:+.2f})"
+            )
+        if self.save_dir is not None:
+            self.save_dir.mkdir(parents=True, exist_ok=True)
+            snap.save(self.save_dir / f"opponent_{generation:04d}.pt")
+            tmp = self.save_dir / "history.json.tmp"
+            tmp.write_text(json.dumps(self.history, indent=1))
+            tmp.replace(self.save_dir / "history.json")
+
+    def _restore(self) -> None:
+        assert self.save_dir is not None
+        self.history = json.loads((self.save_dir / "history.json").read_text())
+        gens = [h["generation"] for h in self.history][-self.pool_size :]
+        self.pool = [PolicySnapshot.load(self.save_dir / f"opponent_{g:04d}.pt") for g in gens]
+        self.games = self.history[-1]["games"]

@@ -1,0 +1,245 @@
+"""Training: runs through the library and the CLI, checkpoints and resume, evaluation."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
+
+from foosball_gym.cli import main  # noqa: E402
+from foosball_gym.training.evaluation import evaluate, wilson_interval  # noqa: E402
+from foosball_gym.training.models import ModelLoadError, load_policy  # noqa: E402
+from foosball_gym.training.run import TrainConfig, read_curve, train  # noqa: E402
+
+SMALL = [
+    "--n-envs",
+    "2",
+    "--n-steps",
+    "256",
+    "--batch-size",
+    "128",
+    "--eval-episodes",
+    "5",
+    "--no-progress",
+]
+
+
+def test_cli_trains_block_and_the_result_evaluates_through_the_cli(tmp_path, capsys):
+    run = tmp_path / "block"
+    assert (
+        main(
+            [
+                "train",
+                "Foosball-Block-v0",
+                "--timesteps",
+                "3000",
+                "--eval-freq",
+                "1000",
+                "--checkpoint-freq",
+                "1024",
+                "--out",
+                str(run),
+                *SMALL,
+            ]
+        )
+        == 0
+    )
+    for name in (
+        "model.zip",
+        "config.json",
+        "vecnormalize.pkl",
+        "eval.csv",
+        "eval.png",
+        "checkpoints/latest.json",
+    ):
+        assert (run / name).exists(), name
+    assert list((run / "tb").rglob("events.out.tfevents.*"))
+    config = json.loads((run / "config.json").read_text())
+    assert config["env_id"] == "Foosball-Block-v0" and config["net_arch"] == [256, 128, 64]
+    curve = read_curve(run / "eval.csv")
+    assert [int(r["timesteps"]) for r in curve] == [1000, 2000, 3000, 3072]
+    assert all(0 <= r["success_rate"] <= 1 for r in curve)
+
+    out = tmp_path / "eval.json"
+    assert main(["eval", str(run), "--episodes", "12", "--seed", "5", "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "success rate" in printed and "95 % CI" in printed
+    result = json.loads(out.read_text())
+    assert result["episodes"] == 12 and result["seed"] == 5
+    assert result["env_id"] == "Foosball-Block-v0"
+    assert result["ci_low"] <= result["success_rate"] <= result["ci_high"]
+
+
+def test_env_kwargs_reach_the_environment(tmp_path):
+    run = tmp_path / "score"
+    main(
+        [
+            "train",
+            "Foosball-Score-v0",
+            "--timesteps",
+            "512",
+            "--eval-freq",
+            "512",
+            "--env-kwarg",
+            "ball_start=incoming",
+            "--env-kwarg",
+            "goal_reward=50.0",
+            "--out",
+            str(run),
+            *SMALL,
+        ]
+    )
+    config = json.loads((run / "config.json").read_text())
+    assert config["env_kwargs"] == {"ball_start": "incoming", "goal_reward": 50.0}
+    loaded = load_policy(run)
+    assert loaded.env_kwargs == {"ball_start": "incoming", "goal_reward": 50.0}
+
+
+class StopAt(BaseCallback):
+    """Interrupts training the way Ctrl-C would."""
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        self.steps = steps
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self.steps:
+            raise KeyboardInterrupt
+        return True
+
+
+def test_an_interrupted_run_resumes_from_its_last_checkpoint(tmp_path):
+    run = tmp_path / "run"
+    config = TrainConfig(
+        "Foosball-Block-v0",
+        timesteps=4096,
+        n_envs=2,
+        n_steps=256,
+        batch_size=128,
+        eval_freq=1024,
+        eval_episodes=3,
+        checkpoint_freq=1024,
+    )
+    with pytest.raises(KeyboardInterrupt):
+        train(config, run, callbacks=[StopAt(2600)])
+    pointer = json.loads((run / "checkpoints" / "latest.json").read_text())
+    assert pointer["timesteps"] == 2048
+    assert not (run / "model.zip").exists()
+    assert main(["train", "--resume", str(run), "--no-progress"]) == 0
+    assert (run / "model.zip").exists()
+    steps = [int(r["timesteps"]) for r in read_curve(run / "eval.csv")]
+    assert steps[-1] == 4096 and steps == sorted(steps)
+
+
+def test_evaluation_is_reproducible_and_counts_successes():
+    import gymnasium as gym
+
+    from foosball_gym.policies.scripted import ScriptedKeeper
+
+    env = gym.make("Foosball-Block-v0")
+    keeper = ScriptedKeeper(env.unwrapped.obs_builder.names)
+    env.close()
+    a = evaluate(keeper, "Foosball-Block-v0", episodes=30, seed=3)
+    b = evaluate(keeper, "Foosball-Block-v0", episodes=30, seed=3)
+    assert a == b
+    assert a.successes == round(a.success_rate * 30) and a.success_rate >= 0.9
+    zero = evaluate(lambda obs: np.zeros(1, np.float32), "Foosball-Block-v0", episodes=30, seed=3)
+    assert zero.goals_against == 30 - zero.successes
+
+
+def test_wilson_interval():
+    low, high = wilson_interval(50, 100)
+    assert low == pytest.approx(0.4038, abs=1e-3) and high == pytest.approx(0.5962, abs=1e-3)
+    assert (
+        wilson_interval(100, 100)[1] == pytest.approx(1.0) and wilson_interval(100, 100)[0] > 0.95
+    )
+    assert wilson_interval(0, 10)[0] == 0.0
+
+
+def test_cli_evaluates_the_scripted_baseline_and_records_a_video(tmp_path, capsys):
+    out, video = tmp_path / "s.json", tmp_path / "s.mp4"
+    assert (
+        main(
+            [
+                "eval",
+                "--policy",
+                "scripted",
+                "Foosball-Block-v0",
+                "--episodes",
+                "20",
+                "--json",
+                str(out),
+                "--video",
+                str(video),
+            ]
+        )
+        == 0
+    )
+    assert json.loads(out.read_text())["success_rate"] >= 0.9
+    cv2 = pytest.importorskip("cv2")
+    cap = cv2.VideoCapture(str(video))
+    frames = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    ok, frame = cap.read()
+    assert ok and frame.shape == (360, 640, 3) and frames > 10
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["train", "Foosball-Nothing-v0", "--no-progress"], "unknown environment"),
+        (["train", "Foosball-Block-v0", "--env-kwarg", "speed"], "KEY=VALUE"),
+        (["train", "Foosball-Block-v0", "--env-kwarg", "warp=3", "--no-progress"], "warp"),
+        (["train", "Foosball-Block-v0", "--self-play", "--no-progress"], "no opponent"),
+        (["train", "Foosball-Block-v0", "--timesteps", "0"], "at least 1"),
+        (["train", "--resume", "/nonexistent/run"], "no run there"),
+        (["eval", "/nonexistent/model.zip"], "no model at"),
+        (["eval", "--policy", "scripted", "Foosball-Nothing-v0"], "unknown environment"),
+        (["eval", "builtin:nothing"], "no built-in policy"),
+        (["frobnicate"], "invalid choice"),
+    ],
+)
+def test_bad_arguments_exit_with_status_2_and_a_message(
+    argv, message, capsys, tmp_path, monkeypatch
+):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_a_corrupt_model_file_gives_a_clear_error(tmp_path, capsys):
+    bad = tmp_path / "model.zip"
+    bad.write_bytes(b"this is not a zip file")
+    with pytest.raises(SystemExit) as exit_info:
+        main(["eval", str(bad), "--env", "Foosball-Block-v0"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert "cannot read" in err and "Traceback" not in err
+    with pytest.raises(ModelLoadError):
+        load_policy(bad)
+
+
+@pytest.mark.parametrize("command", ["train", "eval", "envs"])
+def test_every_command_has_help(command, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main([command, "--help"])
+    assert exit_info.value.code == 0
+    assert "usage: foosball" in capsys.readouterr().out
+
+
+def test_envs_lists_every_environment_with_its_options(capsys):
+    import foosball_gym
+
+    assert main(["envs"]) == 0
+    out = capsys.readouterr().out
+    for env_id in foosball_gym.ENV_IDS:
+        assert env_id in out
+    assert "ball_start = 'resting'  one of 'resting', 'incoming'" in out
+    assert "continuous = False" in out
