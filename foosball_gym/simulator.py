@@ -64,9 +64,7 @@ with _quiet_stdout():
     import pybullet
     from pybullet_utils.bullet_client import BulletClient
 
-NO_GOAL = 0
-HOME_SCORED = 1  # the ball crossed the away goal line (x > 0)
-AWAY_SCORED = -1
+NO_GOAL, HOME_SCORED, AWAY_SCORED = T.NO_GOAL, T.HOME_SCORED, T.AWAY_SCORED
 
 CONTROL_MODES = ("position", "velocity", "torque")
 
@@ -239,7 +237,8 @@ class TableSim:
         """Position gains of the simulated drives (used in position mode)."""
         if slide_gain <= 0 or spin_gain <= 0:
             raise ValueError(f"drive gains must be positive, got {slide_gain}, {spin_gain}")
-        self._gains = [float(slide_gain)] * self._n + [float(spin_gain)] * self._n
+        self.slide_gain, self.spin_gain = float(slide_gain), float(spin_gain)
+        self._gains = [self.slide_gain] * self._n + [self.spin_gain] * self._n
 
     def _init_motors(self) -> None:
         # The speed clamp set here stays with Bullet's motor; later array commands keep it.

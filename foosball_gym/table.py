@@ -73,6 +73,11 @@ SURFACE_RESTITUTION = 0.5  # the walls and the goal pockets are of the same mate
 FIGURINE_FRICTION = 0.2
 FIGURINE_RESTITUTION = 0.5
 
+# What a simulation step reports about goals (seen from the home side).
+NO_GOAL = 0
+HOME_SCORED = 1  # the ball crossed the away goal line (x > 0)
+AWAY_SCORED = -1
+
 # Timing.
 PHYSICS_HZ = 240
 CONTROL_HZ = 60

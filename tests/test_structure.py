@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 PACKAGE = Path(__file__).resolve().parents[1] / "foosball_gym"
 
 
@@ -39,3 +41,42 @@ def test_importing_the_package_needs_no_torch_and_registers_the_ids():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
+
+
+def test_a_tasks_interface_is_built_without_the_simulator():
+    code = (
+        "import sys; from foosball_gym.envs.interface import task_interface;"
+        "i = task_interface('Foosball-KeeperVsKeeper-v0');"
+        "assert 'pybullet' not in sys.modules, 'pybullet was imported';"
+        "print(len(i.builder.names))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "10"
+
+
+def test_the_interface_is_the_environments_own():
+    import gymnasium as gym
+    import numpy as np
+
+    from foosball_gym import ENV_IDS
+    from foosball_gym.envs.interface import task_interface
+
+    for env_id in ENV_IDS:
+        for kwargs in ({}, {"joint_velocities": False}):
+            env = gym.make(env_id, **kwargs)
+            interface = task_interface(env_id, kwargs)
+            assert interface.builder.names == env.unwrapped.obs_builder.names
+            env.reset(seed=0)
+            action = np.linspace(-1.2, 0.9, env.action_space.shape[0])
+            env.step(action.astype(np.float32))
+            u = env.unwrapped
+            sim_targets = dict(
+                zip(
+                    [(r, "slide") for r in u.layout.rods] + [(r, "spin") for r in u.layout.rods],
+                    u._targets,
+                )
+            )
+            for joint, value in interface.action_to_targets(action).items():
+                assert sim_targets[joint] == pytest.approx(value), (env_id, joint)
+            env.close()

@@ -19,6 +19,8 @@ import numpy as np
 from gymnasium import spaces
 
 from foosball_gym import table as T
+from foosball_gym.envs.common import check_range
+from foosball_gym.envs.interface import Layout, TaskInterface
 from foosball_gym.envs.observations import (
     JOINT_SETS,
     ObservationBuilder,
@@ -27,7 +29,6 @@ from foosball_gym.envs.observations import (
 )
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
 from foosball_gym.policies.scripted import ScriptedTeam
-from foosball_gym.simulator import AWAY_SCORED, HOME_SCORED, TableSim
 
 Policy = Callable[[np.ndarray], Any]
 
@@ -36,27 +37,6 @@ _BALL_LIMIT_X = T.FIELD_HALF_LENGTH - T.BALL_RADIUS
 _BALL_LIMIT_Y = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
 # A ball slower than this (m/s) counts as lying still for the stagnation rule.
 STILL_SPEED = 0.05
-
-
-@dataclass(frozen=True)
-class Layout:
-    """Which rods a task puts in play and who moves them.
-
-    Attributes:
-        controlled: home rods the learner drives, keeper first.
-        joints: ``"slide"`` (prismatic only) or ``"both"``: the learner's action joints.
-        opponent: away rods an opponent policy drives (the mirror of ``controlled``).
-        static: rods held still at their start position (obstacles).
-    """
-
-    controlled: tuple[str, ...]
-    joints: str
-    opponent: tuple[str, ...] = ()
-    static: tuple[str, ...] = ()
-
-    @property
-    def rods(self) -> tuple[str, ...]:
-        return self.controlled + self.opponent + self.static
 
 
 @dataclass
@@ -140,6 +120,13 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         opponent_prismatic_only: observe only the opponent's prismatic joints, as the real
             table's camera does (tasks with an opponent only).
 
+    Domain randomisation (each off by default; a (low, high) range turns it on, sampled
+    uniformly at every reset):
+        ball_friction_range: the ball's friction coefficient (spec: 0.1).
+        ball_restitution_range: the restitution of every ball contact (spec: 0.5).
+        ball_mass_range: the ball's mass in kg (spec: 0.022).
+        drive_gain_range: a factor on the drives' position gains: how briskly they respond.
+
     Other:
         opponent: the away side's policy, a callable from the mirrored observation to an
             action (tasks with an opponent only; default: the scripted team).
@@ -155,6 +142,15 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     reset_options: tuple[str, ...] = ("ball_position", "ball_velocity")
     #: The task's own discrete options and the values each takes (first: the default).
     task_options: dict[str, tuple[Any, ...]] = {}
+
+    @classmethod
+    def task_interface(cls, **kwargs: Any) -> TaskInterface:
+        """This task's observation builder and action mapping for ``kwargs``, without building a
+        simulator: what the real table needs to run a policy trained on the task."""
+        env = cls.__new__(cls)
+        env._simulate = False
+        cls.__init__(env, **kwargs)
+        return env.interface
 
     @classmethod
     def option_grid(cls) -> dict[str, tuple[Any, ...]]:
@@ -182,6 +178,10 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         observe_figurines: bool = False,
         opponent_prismatic_only: bool = False,
         stagnation_steps: int = 0,
+        ball_friction_range: tuple[float, float] | None = None,
+        ball_restitution_range: tuple[float, float] | None = None,
+        ball_mass_range: tuple[float, float] | None = None,
+        drive_gain_range: tuple[float, float] | None = None,
         render_mode: str | None = None,
         render_width: int = 320,
         render_height: int = 180,
@@ -235,11 +235,27 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             observe_figurines=_flag("observe_figurines", observe_figurines),
         )
         self.stagnation_steps = int(stagnation_steps)
+        self.randomisation = {
+            name: check_range(name, value, low, high)
+            for name, value, low, high in (
+                ("ball_friction_range", ball_friction_range, 0.0, 10.0),
+                ("ball_restitution_range", ball_restitution_range, 0.0, 1.0),
+                ("ball_mass_range", ball_mass_range, 1e-4, 1.0),
+                ("drive_gain_range", drive_gain_range, 1e-3, 10.0),
+            )
+            if value is not None
+        }
 
-        self.sim = TableSim(
-            layout.rods, physics_hz=physics_hz, substeps=substeps, gui=render_mode == "human"
-        )
-        self.dt = self.sim.control_dt
+        self.dt = substeps / physics_hz
+        self.sim = None
+        if getattr(self, "_simulate", True):
+            # Imported here: the real table builds a task's interface without the simulator.
+            from foosball_gym.simulator import TableSim
+
+            self.sim = TableSim(
+                layout.rods, physics_hz=physics_hz, substeps=substeps, gui=render_mode == "human"
+            )
+            self._base_gains = (self.sim.slide_gain, self.sim.spin_gain)
         n = len(layout.rods)
         self._n = n
         self._rods = [T.rod(r) for r in layout.rods]
@@ -249,14 +265,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self._n_act = len(self._act_joint)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(self._n_act,), dtype=np.float32)
 
-        self.obs_builder = ObservationBuilder(
-            layout.rods,
-            layout.controlled,
-            layout.joints,
-            layout.opponent,
-            extras,
-            self.observation_options,
-        )
+        self.interface = TaskInterface.create(layout, extras, self.observation_options)
+        self.obs_builder = self.interface.builder
         self.observation_space = self.obs_builder.space
         self._rewards = RewardComputer(self.weights, self._rods[:n_own])
 
@@ -357,13 +367,34 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         if ball_velocity is not None:
             ball_velocity = check_pair("ball_velocity", ball_velocity)
         self._goals_for = self._goals_against = 0
+        dynamics = self._randomise_dynamics()
         self._serve(self._sample_start(ball_position, ball_velocity, options))
         self._started = True
         obs = self.obs_builder.build(self._pos, self._vel, self._ball)
         info = {"goal": 0, "is_success": self._is_success(), **self._score_info()}
+        if dynamics:
+            info["dynamics"] = dynamics
         if self.render_mode == "human":
             self.render()
         return obs, info
+
+    def _randomise_dynamics(self) -> dict[str, float]:
+        """Draw this episode's physical parameters where randomisation is on."""
+        if not self.randomisation:
+            return {}
+        drawn = {
+            name[: -len("_range")]: float(self.np_random.uniform(*bounds))
+            for name, bounds in self.randomisation.items()
+        }
+        self.sim.set_ball_dynamics(
+            friction=drawn.get("ball_friction"),
+            restitution=drawn.get("ball_restitution"),
+            mass=drawn.get("ball_mass"),
+        )
+        if "drive_gain" in drawn:
+            slide, spin = self._base_gains
+            self.sim.set_drive_gains(slide * drawn["drive_gain"], spin * drawn["drive_gain"])
+        return drawn
 
     def _serve(self, start: Start) -> None:
         slide = [
@@ -392,9 +423,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self.sim.command("position", targets)
         goal, out = self.sim.step()
         self._read_state()
-        if goal == HOME_SCORED:
+        if goal == T.HOME_SCORED:
             self._goals_for += 1
-        elif goal == AWAY_SCORED:
+        elif goal == T.AWAY_SCORED:
             self._goals_against += 1
         stagnated = self._stagnated()
         ended = out or goal != 0 or stagnated

@@ -5,8 +5,14 @@ from __future__ import annotations
 from typing import Any
 
 from foosball_gym import table as T
-from foosball_gym.envs.base import FoosballEnv, Layout, Start
-from foosball_gym.envs.common import check_range, random_shot_start, shot_at_goal
+from foosball_gym.envs.base import FoosballEnv, Start
+from foosball_gym.envs.common import (
+    SHOT_SPEED_LIMITS,
+    check_range,
+    random_shot_start,
+    shot_at_goal,
+)
+from foosball_gym.envs.interface import Layout
 
 
 class BlockEnv(FoosballEnv):
@@ -61,7 +67,7 @@ class BlockEnv(FoosballEnv):
     """
 
     def __init__(self, *, speed_range: tuple[float, float] = (2.0, 7.0), **kwargs: Any) -> None:
-        self.speed_range = check_range("speed_range", speed_range, low=1e-3)
+        self.speed_range = check_range("speed_range", speed_range, *SHOT_SPEED_LIMITS)
         super().__init__(Layout(controlled=("home_keeper",), joints="slide"), **kwargs)
 
     def _sample_start(self, ball_position, ball_velocity, options: dict[str, Any]) -> Start:

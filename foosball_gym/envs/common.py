@@ -3,23 +3,26 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 from foosball_gym import table as T
 
 GOAL_MOUTH_HALF = T.GOAL_HALF_WIDTH - T.BALL_RADIUS
+SHOT_SPEED_LIMITS = (1e-3, 2 * T.BALL_MAX_SPEED)
 # The spec's resting ball: 0.497 m from the centre line, +-5 mm, in front of a keeper.
 REST_X, REST_X_JITTER, REST_Y = 0.497, 0.005, 0.1
 
 
-def check_range(name: str, value: tuple[float, float], low: float = 0.0) -> tuple[float, float]:
+def check_range(name: str, value: Any, low: float, high: float) -> tuple[float, float]:
+    """A (low, high) pair within [low, high] bounds, or a ValueError saying what is allowed."""
     try:
         lo, hi = (float(v) for v in value)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a pair (low, high), got {value!r}") from None
-    if not (low <= lo <= hi and math.isfinite(hi)):
-        raise ValueError(f"{name} must be (low, high) with {low} <= low <= high, got {value!r}")
+    if not (low <= lo <= hi <= high):
+        raise ValueError(f"{name} must satisfy {low} <= low <= high <= {high}, got {value!r}")
     return lo, hi
 
 

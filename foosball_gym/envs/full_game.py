@@ -7,7 +7,8 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.envs.base import FoosballEnv, Layout, Start
+from foosball_gym.envs.base import FoosballEnv, Start
+from foosball_gym.envs.interface import Layout
 
 
 class FullGameEnv(FoosballEnv):

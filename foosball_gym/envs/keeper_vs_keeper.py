@@ -5,8 +5,9 @@ from __future__ import annotations
 from typing import Any
 
 from foosball_gym import table as T
-from foosball_gym.envs.base import FoosballEnv, Layout, Start
+from foosball_gym.envs.base import FoosballEnv, Start
 from foosball_gym.envs.common import resting_in_front_of
+from foosball_gym.envs.interface import Layout
 
 
 class KeeperVsKeeperEnv(FoosballEnv):

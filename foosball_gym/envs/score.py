@@ -7,14 +7,16 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.envs.base import FoosballEnv, Layout, Start
+from foosball_gym.envs.base import FoosballEnv, Start
 from foosball_gym.envs.common import (
+    SHOT_SPEED_LIMITS,
     check_choice,
     check_range,
     random_shot_start,
     resting_in_front_of,
     shot_at_goal,
 )
+from foosball_gym.envs.interface import Layout
 
 BALL_STARTS = ("resting", "incoming")
 OBSTACLES = ("away_keeper", "away_defense", "away_offense")
@@ -87,7 +89,7 @@ class ScoreEnv(FoosballEnv):
         if not isinstance(obstacles, (bool, np.bool_)):
             raise ValueError(f"obstacles must be True or False, got {obstacles!r}")
         self.obstacles = bool(obstacles)
-        self.speed_range = check_range("speed_range", speed_range, low=1e-3)
+        self.speed_range = check_range("speed_range", speed_range, *SHOT_SPEED_LIMITS)
         static = OBSTACLES if self.obstacles else ()
         super().__init__(
             Layout(controlled=("home_keeper",), joints="both", static=static),
