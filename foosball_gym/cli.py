@@ -73,10 +73,9 @@ def cmd_train(args: argparse.Namespace) -> int:
             selfplay_pool=args.selfplay_pool,
             target_success=args.target_success,
         )
-        if args.n_steps:
-            config.n_steps = args.n_steps
-        if args.batch_size:
-            config.batch_size = args.batch_size
+        for name in ("n_steps", "batch_size", "learning_rate"):
+            if getattr(args, name) is not None:
+                setattr(config, name, getattr(args, name))
         out = Path(args.out or f"runs/{config.env_id}-seed{config.seed}")
     try:
         result = train(config, out, progress_bar=not args.no_progress, resume=bool(args.resume))
@@ -237,6 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--n-steps", type=_positive_int, help="PPO horizon per environment (128)")
     p.add_argument("--batch-size", type=_positive_int, help="minibatch size (256)")
+    p.add_argument("--learning-rate", type=float, help="learning rate (1e-3)")
     p.add_argument(
         "--eval-freq", type=_positive_int, default=10_000, help="evaluate every this many steps"
     )

@@ -1,0 +1,296 @@
+"""All drives of a table behind the safety layer: what the play loop talks to.
+
+.. code-block:: python
+
+    with TableDrives(load_config(shipped_table("keeper"))) as drives:
+        drives.bring_up()
+        while playing:
+            now = time.monotonic()
+            drives.command(targets, now)   # checks faults and the watchdog first
+            state = drives.read()          # {(rod, joint): (position, velocity)}
+            ...                            # camera, Kalman filter, policy
+            drives.feed_state(now)         # a fresh state estimate arrived
+            drives.check(now)
+
+Leaving the ``with`` block, normally or by any exception (Ctrl-C included), disables every
+drive and re-raises. A fault on any drive, or a watchdog that trips, quick-stops every drive
+and raises :class:`~foosball_gym.hardware.safety.DriveFault` or
+:class:`~foosball_gym.hardware.safety.WatchdogTripped`; the table stays stopped, and every
+later call raises the same error, until :meth:`TableDrives.bring_up` runs again.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from types import TracebackType
+
+import canopen
+
+from foosball_gym.hardware.cia402 import Cia402Drive
+from foosball_gym.hardware.config import Joint, TableConfig
+from foosball_gym.hardware.safety import (
+    DriveFault,
+    JointLimits,
+    SafetyError,
+    SafetyLatch,
+    TargetLimiter,
+    UnsafeCommand,
+    Watchdog,
+    WatchdogTripped,
+)
+
+logger = logging.getLogger(__name__)
+
+# How long the receive thread may take to notice a closed network; the default (1 s) would
+# make every close wait that long.
+NOTIFIER_CYCLE_S = 0.1
+
+
+class TableDrives:
+    """The table's drives, with limits, rate limits, a watchdog and one stop for all.
+
+    Args:
+        config: the table configuration.
+        network: a connected ``canopen.Network`` to use; by default one is opened on
+            ``config.bus`` and closed by :meth:`close`.
+
+    Attributes:
+        drives: one :class:`Cia402Drive` per configured joint, by ``(rod, joint)``.
+        watchdog: the :class:`Watchdog` fed by :meth:`command` and :meth:`feed_state`.
+    """
+
+    def __init__(self, config: TableConfig, network: canopen.Network | None = None) -> None:
+        self.config = config
+        self._own_network = network is None
+        if network is None:
+            network = canopen.Network()
+            network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
+            bus = config.bus
+            network.connect(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
+        self.network = network
+        self._closed = False
+        try:
+            self.drives: dict[Joint, Cia402Drive] = {
+                joint.key: Cia402Drive(
+                    network,
+                    joint,
+                    mode=config.mode,
+                    control_hz=config.control_hz,
+                    heartbeat_timeout_s=config.heartbeat_timeout_s,
+                )
+                for joint in config.joints
+            }
+        except BaseException:
+            self._disconnect()
+            raise
+        self._limiters = {
+            joint.key: TargetLimiter(JointLimits.of(joint), config.control_period)
+            for joint in config.joints
+        }
+        self.watchdog = Watchdog(config.watchdog_s)
+        self._latch = SafetyLatch(self._stop_for)
+        self._running = False
+
+    # ------------------------------------------------------------------ context manager
+
+    def __enter__(self) -> TableDrives:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        try:
+            self.close()
+        except Exception:
+            if exc is None:
+                raise
+            # The exception that ended the block is the one to see; this one goes to the log.
+            logger.exception("while disabling the drives after %r", exc)
+
+    # ------------------------------------------------------------------ the play loop's calls
+
+    def bring_up(self) -> dict[Joint, float]:
+        """Bring every drive to "operation enabled" and start from where the rods are.
+
+        Clears a tripped safety latch and the watchdog (a stopped table is restarted this
+        way). If a drive fails, the others are disabled again before the error is raised.
+
+        Returns:
+            Each joint's position (m or rad) at bring-up.
+        """
+        self._check_open()
+        self._running = False
+        self._latch.reset()
+        self.watchdog.reset()
+        positions = {}
+        try:
+            for key, drive in self.drives.items():
+                positions[key] = drive.bring_up()
+                self._limiters[key].reset(positions[key])
+        except BaseException:
+            self._disable_all(raise_errors=False)
+            raise
+        self._running = True
+        return positions
+
+    def command(self, targets: Mapping[Joint, float], now: float) -> dict[Joint, float]:
+        """Send one control step's position targets.
+
+        Checks faults and the watchdog first, then limits and rate-limits every target and
+        sends it; in csp one SYNC then makes all drives take theirs at once.
+
+        Args:
+            targets: SI targets (m or rad) by ``(rod, joint)``; a joint left out keeps going
+                to its last target.
+            now: the time of this command, on the clock :meth:`feed_state` and
+                :meth:`check` use.
+
+        Returns:
+            The targets sent, after the safety layer.
+
+        Raises:
+            DriveFault, WatchdogTripped, UnsafeCommand: after every drive was stopped.
+            RuntimeError: before :meth:`bring_up` or after :meth:`stop`.
+        """
+        self.check(now)
+        if not self._running:
+            raise RuntimeError("the drives are not running: call bring_up() first")
+        unknown = [key for key in targets if key not in self._limiters]
+        if unknown:
+            self._latch.trip(
+                UnsafeCommand(f"no drive for {unknown}; configured: {list(self._limiters)}")
+            )
+        sent = {}
+        for key, limiter in self._limiters.items():
+            try:
+                sent[key] = limiter.step(targets.get(key))
+            except UnsafeCommand as e:
+                self._latch.trip(UnsafeCommand(f"{key[0]} {key[1]}: {e}"))
+        try:
+            for key, value in sent.items():
+                self.drives[key].set_target(value)
+            if self.config.mode == "csp":
+                for drive in self.drives.values():
+                    drive.mark_sync()
+                self.network.sync.transmit()
+        except DriveFault as e:
+            self._latch.trip(e)
+        self.watchdog.feed_command(now)
+        return sent
+
+    def read(self) -> dict[Joint, tuple[float, float]]:
+        """Each joint's position and velocity (m, m/s or rad, rad/s).
+
+        In csp right after :meth:`command`, the drives' answers to its SYNC (sampled at the
+        same instant); otherwise read over SDO.
+        """
+        self._check_open()
+        try:
+            return {key: drive.actual() for key, drive in self.drives.items()}
+        except DriveFault as e:
+            self._latch.trip(e)
+
+    def feed_state(self, now: float) -> None:
+        """A fresh state estimate (camera, filter) arrived at ``now``."""
+        self.watchdog.feed_state(now)
+
+    def check(self, now: float) -> None:
+        """Raise if any drive is at fault or the watchdog trips, after stopping every drive.
+
+        Raises:
+            DriveFault: which node and why.
+            WatchdogTripped: whether the command or the state estimate went stale.
+        """
+        self._check_open()
+        self._latch.check()
+        for drive in self.drives.values():
+            reason = drive.fault_reason()
+            if reason is not None:
+                self._latch.trip(DriveFault(drive.joint, reason))
+        if self._running:
+            try:
+                self.watchdog.check(now)
+            except WatchdogTripped as e:
+                self._latch.trip(e)
+
+    def stop(self) -> None:
+        """Quick-stop every drive (they brake and hold); :meth:`bring_up` starts them again."""
+        self._check_open()
+        self._quick_stop_all()
+
+    def close(self) -> None:
+        """Disable every drive, send it to NMT pre-operational and close the bus.
+
+        Every drive is tried, even when one fails or Ctrl-C arrives meanwhile; the failures
+        are raised afterwards. Safe to call twice.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        interrupt = None
+        try:
+            self._disable_all(raise_errors=True)
+        except KeyboardInterrupt as e:
+            interrupt = e
+        finally:
+            for drive in self.drives.values():
+                try:
+                    drive.release()
+                except DriveFault as e:
+                    logger.warning("%s", e)
+            self._disconnect()
+        if interrupt is not None:
+            raise interrupt
+
+    # ------------------------------------------------------------------ internals
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RuntimeError("the table's drives are closed")
+
+    def _quick_stop_all(self, last: int | None = None) -> None:
+        """Quick-stop every drive, node ``last`` after the others."""
+        self._running = False
+        self._for_every_drive(Cia402Drive.quick_stop, "quick stop", raise_errors=True, last=last)
+
+    def _stop_for(self, error: SafetyError) -> None:
+        # A faulty drive may not answer, and waiting for it must not delay stopping the rest.
+        self._quick_stop_all(last=getattr(error, "node_id", None))
+
+    def _disable_all(self, *, raise_errors: bool) -> None:
+        self._running = False
+        self._for_every_drive(Cia402Drive.disable, "disable", raise_errors=raise_errors)
+
+    def _for_every_drive(
+        self,
+        action: Callable[[Cia402Drive], object],
+        what: str,
+        *,
+        raise_errors: bool,
+        last: int | None = None,
+    ) -> None:
+        """Run ``action`` on every drive (node ``last`` last), whatever happens to one."""
+        failures = []
+        interrupt = None
+        for drive in sorted(self.drives.values(), key=lambda d: d.joint.node_id == last):
+            try:
+                action(drive)
+            except KeyboardInterrupt as e:
+                interrupt = e  # a second Ctrl-C must not leave the other drives running
+            except Exception as e:
+                failures.append(str(e))
+        if interrupt is not None:
+            raise interrupt
+        if failures:
+            message = f"{what} failed: " + "; ".join(failures)
+            if raise_errors:
+                raise RuntimeError(message)
+            logger.error("%s", message)
+
+    def _disconnect(self) -> None:
+        if self._own_network:
+            self.network.disconnect()

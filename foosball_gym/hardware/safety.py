@@ -1,0 +1,225 @@
+"""Safety in the driver, not in the policy: limits, rate limits, a watchdog, one stop for all.
+
+Pure logic, no CAN: :mod:`foosball_gym.hardware.drives` puts it between the play loop and the
+drives, and the tests drive it with made-up timestamps.
+
+- :class:`TargetLimiter` turns whatever a policy asks for into targets that stay inside the
+  joint limits minus a margin, never move faster than the joint's top speed and change speed no
+  faster than its acceleration allows, one control period at a time.
+- :class:`Watchdog` trips when the last command or the last state estimate is too old.
+- :class:`SafetyLatch` stops every drive once, on the first error, and keeps raising that
+  error until the drives are brought up again.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import NoReturn
+
+from foosball_gym.hardware.config import JointConfig
+
+
+class SafetyError(RuntimeError):
+    """Why the drives must stop. ``TableDrives`` raises it after it stopped every drive."""
+
+
+class DriveFault(SafetyError):
+    """A drive reported or showed a fault.
+
+    Attributes:
+        node_id: the drive's node id.
+        joint: ``(rod, joint)`` the drive moves.
+        reason: what was seen (the statusword's fault bit, an EMCY, a lost heartbeat, ...).
+    """
+
+    def __init__(self, joint: JointConfig, reason: str) -> None:
+        self.node_id = joint.node_id
+        self.joint = joint.key
+        self.reason = reason
+        super().__init__(f"{joint.label}: {reason}")
+
+
+class WatchdogTripped(SafetyError):
+    """The last command or the last state estimate was older than the watchdog allows.
+
+    Attributes:
+        what: ``"command"`` or ``"state estimate"``.
+        age: how old it was, in seconds.
+    """
+
+    def __init__(self, what: str, age: float, timeout: float) -> None:
+        self.what = what
+        self.age = age
+        super().__init__(
+            f"watchdog: the last {what} is {age * 1e3:.1f} ms old (limit {timeout * 1e3:.1f} ms)"
+        )
+
+
+class UnsafeCommand(SafetyError, ValueError):
+    """A command the driver refuses (a target that is not a number, a joint with no drive)."""
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """What a joint's targets must respect: ``[lower, upper]``, speed and acceleration."""
+
+    lower: float
+    upper: float
+    max_speed: float
+    max_acceleration: float
+
+    @classmethod
+    def of(cls, joint: JointConfig) -> JointLimits:
+        """The limits of a configured joint: the table's limit minus the joint's margin."""
+        reach = joint.hard_limit - joint.limit_margin
+        return cls(-reach, reach, joint.max_speed, joint.max_acceleration)
+
+
+class TargetLimiter:
+    """Shapes one joint's targets, one control period at a time.
+
+    The output moves towards the requested target (clamped into the limits) as fast as speed
+    and acceleration allow, and slows down in time to stop at the target or at a limit without
+    braking harder than ``max_acceleration``. A joint that starts outside its limits (a rod
+    parked against an end stop) is brought back in at the same rates, never moved further out.
+
+    Args:
+        limits: the joint's limits.
+        dt: the control period in seconds.
+        position: where the joint is now.
+    """
+
+    def __init__(self, limits: JointLimits, dt: float, position: float = 0.0) -> None:
+        if dt <= 0:
+            raise ValueError(f"the control period must be positive, got {dt}")
+        self.limits = limits
+        self.dt = dt
+        self.reset(position)
+
+    def reset(self, position: float) -> None:
+        """Start from a joint at rest at ``position`` (what the drive reports)."""
+        self.position = float(position)
+        self.velocity = 0.0
+        self.goal = min(max(self.position, self.limits.lower), self.limits.upper)
+
+    def _stopping_speed(self, distance: float) -> float:
+        """The fastest speed from which the joint stops within ``distance``.
+
+        Discrete, as the targets are: braking from ``v`` moves the joint ``v * dt``, then
+        ``(v - u) * dt``, ... with ``u = a * dt``, down to a step below ``u``. From
+        ``v = n * u`` that covers ``u * dt * n * (n + 1) / 2``; between two such speeds the
+        distance grows linearly, with ``n + 1`` steps.
+        """
+        if distance <= 0.0:
+            return 0.0
+        u, dt = self.limits.max_acceleration * self.dt, self.dt
+        n = math.floor((math.sqrt(1.0 + 8.0 * distance / (u * dt)) - 1.0) / 2.0)
+        return (distance / dt + u * n * (n + 1) / 2.0) / (n + 1)
+
+    def step(self, target: float | None = None) -> float:
+        """The next target to send.
+
+        Args:
+            target: what the caller asks for; ``None`` keeps going to the last one.
+
+        Raises:
+            UnsafeCommand: for a target that is not a finite number.
+        """
+        lim = self.limits
+        if target is not None:
+            if not math.isfinite(target):
+                raise UnsafeCommand(f"target must be a finite number, got {target!r}")
+            self.goal = min(max(target, lim.lower), lim.upper)
+        p, v, dt = self.position, self.velocity, self.dt
+        error = self.goal - p
+        wanted = math.copysign(self._stopping_speed(abs(error)), error)
+        dv = lim.max_acceleration * dt
+        v_new = min(max(wanted, v - dv, -lim.max_speed), v + dv, lim.max_speed)
+        # Keep the ability to stop before either limit (v_new only shrinks here).
+        v_new = min(v_new, self._stopping_speed(lim.upper - p))
+        v_new = max(v_new, -self._stopping_speed(p - lim.lower))
+        p_new = p + v_new * dt
+        # Rounding must never carry a target over a limit; a joint already outside only moves in.
+        p_new = min(max(p_new, min(lim.lower, p)), max(lim.upper, p))
+        self.velocity = (p_new - p) / dt
+        self.position = p_new
+        return p_new
+
+
+class Watchdog:
+    """Trips when the last command or the last state estimate is older than ``timeout``.
+
+    The caller passes every timestamp (seconds, any clock, as long as it is one clock), so
+    tests and simulated tables can run on their own time. It arms on the first command: a
+    bring-up that takes a while does not trip it.
+
+    Args:
+        timeout: the oldest a command or a state estimate may be, in seconds.
+    """
+
+    def __init__(self, timeout: float) -> None:
+        if timeout <= 0:
+            raise ValueError(f"the watchdog timeout must be positive, got {timeout}")
+        self.timeout = timeout
+        self.reset()
+
+    def reset(self) -> None:
+        self.last_command: float | None = None
+        self.last_state: float | None = None
+
+    @property
+    def armed(self) -> bool:
+        return self.last_command is not None
+
+    def feed_command(self, now: float) -> None:
+        if self.last_command is None and self.last_state is None:
+            # Nothing has been estimated yet: the first estimate is due within the timeout.
+            self.last_state = now
+        self.last_command = now
+
+    def feed_state(self, now: float) -> None:
+        self.last_state = now
+
+    def check(self, now: float) -> None:
+        """Raise :class:`WatchdogTripped` if armed and something is too old."""
+        if self.last_command is None:
+            return
+        for what, last in (("command", self.last_command), ("state estimate", self.last_state)):
+            age = now - last
+            if age > self.timeout:
+                raise WatchdogTripped(what, age, self.timeout)
+
+
+class SafetyLatch:
+    """Stops everything once, on the first safety error, and remembers it.
+
+    Args:
+        stop_all: stops every drive, given the error that calls for it; it should try every
+            drive even when one fails, and may raise afterwards to say which failed.
+    """
+
+    def __init__(self, stop_all: Callable[[SafetyError], None]) -> None:
+        self._stop_all = stop_all
+        self.error: SafetyError | None = None
+
+    def trip(self, error: SafetyError) -> NoReturn:
+        """Stop every drive (the first time) and raise ``error``."""
+        if self.error is None:
+            self.error = error
+            try:
+                self._stop_all(error)
+            except Exception as e:
+                # The first error is the one to report; a drive that did not take the stop is
+                # part of it.
+                raise error from e
+        raise self.error
+
+    def check(self) -> None:
+        """Raise the error that tripped the latch, if any."""
+        if self.error is not None:
+            raise self.error
+
+    def reset(self) -> None:
+        self.error = None
