@@ -1,4 +1,4 @@
-"""The camera above the table, as a pinhole model (no simulator needed)."""
+"""The simulated camera above the table, as a pinhole model (no simulator needed)."""
 
 from __future__ import annotations
 
@@ -10,16 +10,21 @@ import numpy as np
 
 @dataclass(frozen=True)
 class CameraModel:
-    """A pinhole camera above the table (the real table's camera, simulated).
+    """A pinhole camera straight above the table centre, as the simulator renders it.
 
-    ``position`` is in world metres; the camera looks straight down at the origin with the
-    image's up direction along +y, so +x is to the right of the image.
+    It looks down at the origin with the image's up direction along +y, so +x is to the right
+    of the image. Pixel coordinates are OpenCV's (column, row; pixel centres at integers).
+
+    Attributes:
+        width, height: image size in pixels.
+        height_above_table: the camera's height above the playing surface (m).
+        horizontal_half_extent: metres of table visible either side of x = 0, at the surface.
     """
 
     width: int
     height: int
     height_above_table: float = 1.0
-    horizontal_half_extent: float = 0.75  # metres of table visible either side of x = 0
+    horizontal_half_extent: float = 0.75
 
     @property
     def vertical_fov_deg(self) -> float:
@@ -31,15 +36,31 @@ class CameraModel:
         """Focal length in pixels (square pixels)."""
         return self.width / 2 / (self.horizontal_half_extent / self.height_above_table)
 
+    @property
+    def principal_point(self) -> tuple[float, float]:
+        # Measured on PyBullet's renderer: the optical axis lands one row above the image's
+        # middle (at 320x180, 640x360 and 1280x720 alike).
+        return self.width / 2, self.height / 2 - 1
+
     def intrinsics(self) -> np.ndarray:
         f = self.focal_px
-        return np.array([[f, 0, self.width / 2], [0, f, self.height / 2], [0, 0, 1]], dtype=float)
+        cx, cy = self.principal_point
+        return np.array([[f, 0, cx], [0, f, cy], [0, 0, 1]], dtype=float)
+
+    def rotation(self) -> np.ndarray:
+        """World to camera rotation (OpenCV camera axes: x right, y down, z forward)."""
+        return np.diag([1.0, -1.0, -1.0])
+
+    def translation(self) -> np.ndarray:
+        """World to camera translation: the world origin in camera coordinates."""
+        return np.array([0.0, 0.0, self.height_above_table])
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """World points (N, 3) to pixel coordinates (N, 2): column, row."""
         points = np.atleast_2d(points)
         depth = self.height_above_table - points[:, 2]
         f = self.focal_px
-        u = self.width / 2 + f * points[:, 0] / depth
-        v = self.height / 2 - f * points[:, 1] / depth
+        cx, cy = self.principal_point
+        u = cx + f * points[:, 0] / depth
+        v = cy - f * points[:, 1] / depth
         return np.stack([u, v], axis=1)

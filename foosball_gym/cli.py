@@ -64,6 +64,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             seed=args.seed,
             self_play=args.self_play,
             normalize=not args.no_normalize,
+            normalize_reward=not args.no_normalize_reward,
             vec_env=args.vec_env,
             eval_freq=args.eval_freq,
             eval_episodes=args.eval_episodes,
@@ -73,7 +74,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             selfplay_pool=args.selfplay_pool,
             target_success=args.target_success,
         )
-        for name in ("n_steps", "batch_size", "learning_rate"):
+        for name in ("n_steps", "batch_size", "learning_rate", "log_std_init"):
             if getattr(args, name) is not None:
                 setattr(config, name, getattr(args, name))
         out = Path(args.out or f"runs/{config.env_id}-seed{config.seed}")
@@ -141,6 +142,133 @@ def cmd_eval(args: argparse.Namespace) -> int:
     print(result.table())
     Path(args.json).write_text(json.dumps(result.to_dict(), indent=2))
     print(f"wrote {args.json}" + (f" and {args.video}" if args.video else ""))
+    return 0
+
+
+# ------------------------------------------------------------------------------- play
+
+
+def _policy_for_play(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
+    """The policy to play, with the environment it was trained on."""
+    env_kwargs = parse_env_kwargs(args.env_kwarg)
+    if args.model == "scripted":
+        if not args.env:
+            raise CliError("the scripted policy needs --env ENV_ID")
+        import gymnasium as gym
+
+        if args.env not in gym.registry:
+            raise CliError(
+                f"unknown environment {args.env!r}; registered: {', '.join(foosball_gym.ENV_IDS)}"
+            )
+        probe = gym.make(args.env, **env_kwargs)
+        policy = probe.unwrapped.scripted_policy()
+        probe.close()
+        return policy, args.env, env_kwargs
+    loaded = _load(args.model)
+    env_id = args.env or loaded.env_id
+    if env_id is None:
+        raise CliError(f"{args.model} does not say its environment; give --env ENV_ID")
+    return loaded.policy, env_id, {**loaded.env_kwargs, **env_kwargs}
+
+
+def cmd_play(args: argparse.Namespace) -> int:
+    try:
+        from foosball_gym.play.stack import play_real, play_sim
+    except ImportError as err:
+        raise CliError(
+            f'{err}; install the hardware extra: pip install "foosball_gym[hardware]"'
+        ) from None
+    from foosball_gym.envs.interface import task_interface
+    from foosball_gym.hardware.config import ConfigError, load_config
+    from foosball_gym.hardware.safety import SafetyError
+
+    policy, env_id, env_kwargs = _policy_for_play(args)
+    try:
+        if args.table == "sim":
+            report = play_sim(
+                policy,
+                env_id,
+                env_kwargs,
+                episodes=args.episodes,
+                seed=args.seed,
+                log_path=args.log,
+                latency_s=args.latency,
+                status=not args.no_status,
+                camera_size=args.camera,
+            )
+        else:
+            config = load_config(args.table)
+            report = play_real(
+                policy,
+                task_interface(env_id, env_kwargs),
+                config,
+                duration_s=args.duration,
+                log_path=args.log,
+                latency_s=args.latency,
+                status=not args.no_status,
+            )
+    except (ConfigError, ValueError, OSError) as err:
+        raise CliError(str(err)) from None
+    except SafetyError as err:
+        print(f"\nstopped: {err}", file=sys.stderr)
+        return 1
+    print()
+    if report.episodes:
+        print(
+            f"{report.episodes} episodes of {env_id}: success {100 * report.success_rate:.1f} %"
+            f", goals for {report.goals_for}, against {report.goals_against}"
+        )
+    if report.ball_error_mm:
+        errors = report.ball_error_mm
+        print(
+            f"ball detection error: mean {sum(errors) / len(errors):.1f} mm, "
+            f"max {max(errors):.1f} mm"
+        )
+    print(report.timing_table())
+    return 0
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    import glob
+
+    import cv2
+
+    from foosball_gym.hardware.config import ConfigError, load_config, save_config
+    from foosball_gym.play.stack import calibrate_table
+    from foosball_gym.vision import OpenCVSource
+
+    try:
+        config = load_config(args.table)
+    except ConfigError as err:
+        raise CliError(str(err)) from None
+    if args.frame:
+        frame = cv2.imread(args.frame)
+        if frame is None:
+            raise CliError(f"cannot read an image from {args.frame}")
+    else:
+        camera = config.camera
+        try:
+            source = OpenCVSource(
+                camera.get("source", 0), camera.get("width"), camera.get("height")
+            )
+        except OSError as err:
+            raise CliError(str(err)) from None
+        got = source.read()
+        source.close()
+        if got is None:
+            raise CliError("the camera gave no frame")
+        frame = got[1]
+    chessboard = None
+    if args.chessboard:
+        chessboard = [cv2.imread(p) for p in sorted(glob.glob(args.chessboard))]
+        chessboard = [img for img in chessboard if img is not None]
+    try:
+        pattern = tuple(int(v) for v in args.pattern.lower().split("x"))
+        summary = calibrate_table(config, frame, chessboard, pattern, args.square, args.home_side)
+    except ValueError as err:
+        raise CliError(str(err)) from None
+    save_config(config, args.table)
+    print(f"camera calibrated: {summary}; saved to {args.table}")
     return 0
 
 
@@ -229,6 +357,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--no-normalize", action="store_true", help="do not normalise observations")
     p.add_argument(
+        "--no-normalize-reward",
+        action="store_true",
+        help="do not scale rewards by the running spread of returns",
+    )
+    p.add_argument(
         "--vec-env",
         choices=["dummy", "subproc"],
         default="dummy",
@@ -237,6 +370,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-steps", type=_positive_int, help="PPO horizon per environment (128)")
     p.add_argument("--batch-size", type=_positive_int, help="minibatch size (256)")
     p.add_argument("--learning-rate", type=float, help="learning rate (1e-3)")
+    p.add_argument(
+        "--log-std-init", type=float, help="PPO's initial log standard deviation of actions (0)"
+    )
     p.add_argument(
         "--eval-freq", type=_positive_int, default=10_000, help="evaluate every this many steps"
     )
@@ -293,9 +429,84 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--video", metavar="FILE.mp4", help="record the first episode")
     p.set_defaults(func=cmd_eval)
 
+    p = sub.add_parser(
+        "play",
+        help="play a policy on a real table over CAN, or a simulated one",
+        description="Run a policy on a table: camera, ball detector, Kalman "
+        "filter, policy, safety layer, CANopen drives. --table sim runs the "
+        "same stack against a simulated table on a virtual CAN bus.",
+    )
+    p.add_argument("model", help="a run dir, a model .zip, builtin:NAME, or 'scripted'")
+    p.add_argument(
+        "--table",
+        required=True,
+        metavar="CONFIG.yaml|sim",
+        help="the table configuration, or 'sim' for the simulated table",
+    )
+    p.add_argument("--env", help="environment id, where the model does not say it")
+    p.add_argument("--env-kwarg", action="append", metavar="KEY=VALUE")
+    p.add_argument(
+        "--episodes",
+        type=_positive_int,
+        default=20,
+        help="served balls on the simulated table (20)",
+    )
+    p.add_argument(
+        "--duration", type=float, help="seconds to play on a real table (default: until Ctrl-C)"
+    )
+    p.add_argument(
+        "--latency",
+        type=float,
+        help="how far ahead the filter predicts, s "
+        "(default: the table's estimation.latency_s, else 0.03)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated table's serves")
+    p.add_argument(
+        "--camera",
+        type=_size,
+        default=(640, 360),
+        metavar="WxH",
+        help="the simulated camera's resolution (640x360)",
+    )
+    p.add_argument("--log", metavar="FILE.jsonl", help="log every loop to this file")
+    p.add_argument("--no-status", action="store_true", help="no live status line")
+    p.set_defaults(func=cmd_play)
+
+    p = sub.add_parser(
+        "calibrate",
+        help="calibrate a table's camera",
+        description="Solve the camera's pose from the field's corners (and "
+        "its intrinsics from chessboard views) and save it to the table "
+        "configuration.",
+    )
+    p.add_argument("--table", required=True, metavar="CONFIG.yaml")
+    p.add_argument("--frame", help="an image of the field (default: a frame from the camera)")
+    p.add_argument("--chessboard", metavar="GLOB", help="chessboard images for the intrinsics")
+    p.add_argument("--pattern", default="9x6", help="inner corners of the chessboard (9x6)")
+    p.add_argument("--square", type=float, default=0.025, help="chessboard square side, m")
+    p.add_argument(
+        "--home-side",
+        choices=["left", "right"],
+        default="left",
+        help="where the home goal is in the image",
+    )
+    p.set_defaults(func=cmd_calibrate)
+
     p = sub.add_parser("envs", help="list the environments and their options")
     p.set_defaults(func=cmd_envs)
     return parser
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT, e.g. 640x360, got {text!r}"
+        ) from None
+    if width < 1 or height < 1:
+        raise argparse.ArgumentTypeError(f"width and height must be positive, got {text!r}")
+    return width, height
 
 
 def _positive_int(text: str) -> int:

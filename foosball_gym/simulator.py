@@ -318,9 +318,7 @@ class TableSim:
 
         Args:
             slide, spin: joint values per rod in play (default 0).
-            ball_position: (x, y) on the surface, or (x, y, z).
-            ball_velocity: (vx, vy) or (vx, vy, vz); the ball is given the spin of rolling
-                without slipping, so it does not skid when it starts.
+            ball_position, ball_velocity: see :meth:`place_ball`.
         """
         # One step with the ball alone, high above the table, clears what Bullet carries in the
         # ball from step to step (cached contacts, split-impulse velocities): without it a
@@ -334,8 +332,21 @@ class TableSim:
             raise ValueError(f"slide and spin need one value per rod in play ({self._n})")
         for idx, value in zip(self._joint_idx, np.concatenate([slide, spin])):
             self._p.resetJointState(self.body, idx, float(value), 0.0)
-        pos = [float(v) for v in ball_position]
-        vel = [float(v) for v in ball_velocity]
+        self.place_ball(ball_position, ball_velocity)
+        self.command("position", [*slide, *spin])
+
+    def place_ball(
+        self, position: Sequence[float], velocity: Sequence[float] = (0.0, 0.0)
+    ) -> None:
+        """Put the ball somewhere, leaving the rods as they are (a serve in a running game).
+
+        Args:
+            position: (x, y) on the surface, or (x, y, z).
+            velocity: (vx, vy) or (vx, vy, vz); the ball is given the spin of rolling without
+                slipping, so it does not skid when it starts.
+        """
+        pos = [float(v) for v in position]
+        vel = [float(v) for v in velocity]
         if len(pos) == 2:
             pos.append(T.BALL_RADIUS)
         if len(vel) == 2:
@@ -345,7 +356,6 @@ class TableSim:
         rolling = [-vel[1] / T.BALL_RADIUS, vel[0] / T.BALL_RADIUS, 0.0]
         self._p.resetBasePositionAndOrientation(self.ball, pos, [0.0, 0.0, 0.0, 1.0])
         self._p.resetBaseVelocity(self.ball, vel, rolling)
-        self.command("position", [*slide, *spin])
 
     def command(self, mode: str, targets: Sequence[float]) -> None:
         """Set the drives' targets for every joint in play.

@@ -80,3 +80,25 @@ def test_the_interface_is_the_environments_own():
             for joint, value in interface.action_to_targets(action).items():
                 assert sim_targets[joint] == pytest.approx(value), (env_id, joint)
             env.close()
+
+
+def test_hardware_vision_estimation_and_the_play_loop_do_not_import_the_simulator():
+    code = (
+        "import sys;"
+        "import foosball_gym.hardware.drives, foosball_gym.vision, foosball_gym.estimation;"
+        "import foosball_gym.play.loop, foosball_gym.play.session, foosball_gym.play.stack;"
+        "bad = [m for m in ('pybullet', 'foosball_gym.simulator') if m in sys.modules];"
+        "assert not bad, bad"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+
+
+def test_only_the_simulated_table_reaches_the_simulator_from_the_hardware_side():
+    hardware_side = ("hardware", "vision", "estimation", "play")
+    for folder in hardware_side:
+        for path in (PACKAGE / folder).rglob("*.py"):
+            source = path.read_text()
+            assert "foosball_gym.simulator" not in source.replace(
+                "``foosball_gym.simulator``", ""
+            ), path

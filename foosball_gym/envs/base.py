@@ -309,8 +309,12 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     ) -> Start:
         raise NotImplementedError
 
-    def _is_success(self) -> bool:
+    def success(self, goals_for: int, goals_against: int) -> bool:
+        """Whether the task is met with this score so far."""
         raise NotImplementedError
+
+    def _is_success(self) -> bool:
+        return self.success(self._goals_for, self._goals_against)
 
     def _continues_after_goal(self) -> bool:
         """True where a goal (or a dead ball) re-serves instead of ending the episode."""
@@ -340,6 +344,24 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
                 self._opp_builder.names, self._opp_builder.own, self.layout.joints
             )
         self._opponent = policy
+
+    def opponent_targets(self) -> dict[tuple[str, str], float]:
+        """The away rods' joint targets (m, rad) the opponent chooses in the current state."""
+        if self._opponent is None:
+            raise ValueError(f"{type(self).__name__} has no opponent")
+        action = self._check_action(
+            self._opponent(self.opponent_observation()), len(self._opp_joint), "opponent action"
+        )
+        return {
+            self._joint_name(j): a * scale
+            for j, scale, a in zip(self._opp_joint, self._opp_scale, action)
+        }
+
+    def _joint_name(self, index: int) -> tuple[str, str]:
+        """(rod, joint) of an index into the simulator's slides-then-spins."""
+        if index < self._n:
+            return self.layout.rods[index], "slide"
+        return self.layout.rods[index - self._n], "spin"
 
     def opponent_observation(self) -> np.ndarray:
         """What the opponent sees now: the mirrored observation."""
@@ -377,6 +399,27 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         if self.render_mode == "human":
             self.render()
         return obs, info
+
+    def serve(self) -> None:
+        """Put a new ball in play the way this task starts an episode, leaving the rods where
+        they are: a serve in a running game (the simulated real table uses it). The score and
+        the shaping potentials start afresh."""
+        for _ in range(20):
+            start = self._sample_start(None, None, {})
+            if all(
+                clear_of_ball(rod, s, start.ball_position) == s
+                for rod, s in zip(self._rods, self._pos[: self._n])
+            ):
+                break
+        self.sim.place_ball(start.ball_position, start.ball_velocity)
+        self._goals_for = self._goals_against = 0
+        self.refresh()
+        self._still_steps = 0
+        self._rewards.reset(self._controlled_slides(), self._ball[0], self._ball[1], self._n_act)
+
+    def refresh(self) -> None:
+        """Re-read the simulator's state, after something other than :meth:`step` moved it."""
+        self._read_state()
 
     def _randomise_dynamics(self) -> dict[str, float]:
         """Draw this episode's physical parameters where randomisation is on."""

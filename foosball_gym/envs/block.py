@@ -80,5 +80,5 @@ class BlockEnv(FoosballEnv):
             velocity = ball_velocity
         return Start([0.0], [0.0], position, velocity)
 
-    def _is_success(self) -> bool:
-        return self._goals_against == 0
+    def success(self, goals_for: int, goals_against: int) -> bool:
+        return goals_against == 0

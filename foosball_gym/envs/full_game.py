@@ -88,10 +88,10 @@ class FullGameEnv(FoosballEnv):
             velocity = ball_velocity
         return Start([0.0] * 8, [0.0] * 8, position, velocity)
 
-    def _is_success(self) -> bool:
+    def success(self, goals_for: int, goals_against: int) -> bool:
         if self.continuous:
-            return self._goals_for > self._goals_against
-        return self._goals_for > 0
+            return goals_for > goals_against
+        return goals_for > 0
 
     def _continues_after_goal(self) -> bool:
         return self.continuous

@@ -87,5 +87,5 @@ class KeeperVsKeeperEnv(FoosballEnv):
         velocity = (0.0, 0.0) if ball_velocity is None else ball_velocity
         return Start([0.0, 0.0], [0.0, 0.0], position, velocity)
 
-    def _is_success(self) -> bool:
-        return self._goals_for > 0
+    def success(self, goals_for: int, goals_against: int) -> bool:
+        return goals_for > 0

@@ -135,5 +135,5 @@ class ScoreEnv(FoosballEnv):
             )
         return values
 
-    def _is_success(self) -> bool:
-        return self._goals_for > 0
+    def success(self, goals_for: int, goals_against: int) -> bool:
+        return goals_for > 0

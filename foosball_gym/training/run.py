@@ -55,7 +55,10 @@ class TrainConfig:
     n_envs: int = 8
     seed: int = 0
     self_play: bool | None = None  # None: on for two-player environments
-    normalize: bool = True
+    normalize: bool = True  # observations, by running mean and variance
+    # Rewards scaled by the running spread of returns: goals are worth ±1000, and unscaled
+    # value-loss gradients of that size would swamp the policy's under gradient clipping.
+    normalize_reward: bool = True
     vec_env: str = "dummy"
     net_arch: tuple[int, ...] = (256, 128, 64)
     learning_rate: float = 1e-3
@@ -65,6 +68,7 @@ class TrainConfig:
     n_epochs: int = 8
     gae_lambda: float = 0.95
     clip_range: float = 0.2
+    log_std_init: float = 0.0  # initial log std of PPO's Gaussian actions (SB3's default)
     selfplay_window: int = 100
     selfplay_threshold: float = 0.2
     selfplay_pool: int = 1
@@ -141,8 +145,9 @@ def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
         # The first opponent is replaced by a snapshot of the learner as training starts.
         n = venv.action_space.shape[0] // 2
         venv = SelfPlayVecEnv(venv, lambda obs: np.zeros((len(obs), n), np.float32), config.seed)
-    if config.normalize:
-        venv = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=config.gamma)
+    if config.normalize or config.normalize_reward:
+        venv = VecNormalize(venv, norm_obs=config.normalize, norm_reward=config.normalize_reward,
+                            gamma=config.gamma)
     return venv
 
 
@@ -157,6 +162,7 @@ def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
         "tensorboard_log": None if tb_dir is None else str(tb_dir),
     }
     if config.algo == "ppo":
+        policy_kwargs["log_std_init"] = config.log_std_init
         return PPO(
             "MlpPolicy",
             venv,

@@ -1,0 +1,190 @@
+"""The real-table control loop: frame → detection → filter → observation → policy → safety → CAN.
+
+Every stage is timed, so the status line and the session log say where a loop's time goes.
+The loop runs the same against the real table and the simulated one; only the clock and the
+step of the simulation differ (see :mod:`foosball_gym.play.stack`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from foosball_gym.envs.interface import Joint, TaskInterface
+
+STAGES = ("frame", "detect", "estimate", "policy", "command", "read")
+
+
+@dataclass
+class LoopRecord:
+    """What one pass of the loop saw, decided and sent, and how long each stage took."""
+
+    t: float
+    frame_time: float | None
+    detection_px: tuple[float, float] | None
+    ball_measured: tuple[float, float] | None
+    opponent_slides: dict[str, float | None]
+    own_state: dict[str, tuple[float, float]]
+    observation: list[float]
+    action: list[float]
+    targets: dict[str, float]
+    stage_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def loop_ms(self) -> float:
+        return sum(self.stage_ms.values())
+
+
+def _key(joint: Joint) -> str:
+    return f"{joint[0]}.{joint[1]}"
+
+
+class PlayLoop:
+    """One policy playing through the real-table stack.
+
+    Args:
+        policy: a callable from an observation to an action in [-1, 1].
+        interface: the task's observation builder and action mapping.
+        drives: the table's drives (``TableDrives``), already brought up.
+        source: the camera (``read() -> (t, frame) | None``).
+        detector: the ball detector (``detect(frame) -> Detection | None``).
+        calibration: pixel → table-plane back-projection (``pixel_to_table``).
+        estimator: the Kalman filters (``update``, ``observation``).
+        rod_tracker: ``frame -> {rod: slide | None}`` for the opponent's rods (None when the
+            task has no opponent).
+        clock: seconds, monotonic; the simulated table passes its simulated time.
+        on_record: called with every :class:`LoopRecord` (session log, status line).
+    """
+
+    def __init__(
+        self,
+        policy: Callable[[np.ndarray], Any],
+        interface: TaskInterface,
+        drives: Any,
+        source: Any,
+        detector: Any,
+        calibration: Any,
+        estimator: Any,
+        rod_tracker: Callable[[np.ndarray], Mapping[str, float | None]] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        on_record: Callable[[LoopRecord], None] | None = None,
+    ) -> None:
+        self.policy = policy
+        self.interface = interface
+        self.drives = drives
+        self.source = source
+        self.detector = detector
+        self.calibration = calibration
+        self.estimator = estimator
+        self.rod_tracker = rod_tracker
+        self.clock = clock
+        self.on_record = on_record
+        rods = interface.builder.rods_in_play
+        self._n = len(rods)
+        self._slot = {(rod, "slide"): i for i, rod in enumerate(rods)}
+        self._slot.update({(rod, "spin"): self._n + i for i, rod in enumerate(rods)})
+        self._state: Mapping[Joint, tuple[float, float]] = {}
+
+    def start(self, state: Mapping[Joint, tuple[float, float]] | None = None) -> None:
+        """Take the drives' state to begin from (``bring_up`` gives positions only)."""
+        self._state = dict(state) if state is not None else self.drives.read()
+
+    def own_joints(self) -> tuple[list[float], list[float]]:
+        """The drives' joint values in the observation builder's layout (others 0)."""
+        pos = [0.0] * (2 * self._n)
+        vel = [0.0] * (2 * self._n)
+        for joint, (p, v) in self._state.items():
+            slot = self._slot.get(joint)
+            if slot is not None:
+                pos[slot], vel[slot] = p, v
+        return pos, vel
+
+    def decide(self) -> LoopRecord:
+        """Everything before the targets go out: camera to action."""
+        times: dict[str, float] = {}
+        start = time.perf_counter()
+        got = self.source.read()
+        if got is None:
+            raise EOFError("the camera has no more frames")
+        frame_time, frame = got
+        times["frame"] = time.perf_counter()
+        detection = self.detector.detect(frame)
+        pixel, ball = None, None
+        if detection is not None:
+            pixel = (float(detection.u), float(detection.v))
+            ball = tuple(float(v) for v in self.calibration.pixel_to_table(np.array(pixel)))
+        slides = dict(self.rod_tracker(frame)) if self.rod_tracker is not None else {}
+        times["detect"] = time.perf_counter()
+        self.estimator.update(frame_time, ball, slides)
+        pos, vel = self.own_joints()
+        obs = self.estimator.observation(pos, vel)
+        times["estimate"] = time.perf_counter()
+        action = [float(a) for a in np.ravel(self.policy(obs))]
+        if not all(math.isfinite(a) for a in action):
+            raise ValueError(f"the policy returned a non-finite action {action}")
+        times["policy"] = time.perf_counter()
+        stage_ms, last = {}, start
+        for name in ("frame", "detect", "estimate", "policy"):
+            stage_ms[name] = 1e3 * (times[name] - last)
+            last = times[name]
+        return LoopRecord(
+            t=self.clock(),
+            frame_time=frame_time,
+            detection_px=pixel,
+            ball_measured=ball,
+            opponent_slides=slides,
+            own_state={_key(j): s for j, s in self._state.items()},
+            observation=[float(v) for v in obs],
+            action=action,
+            targets={},
+            stage_ms=stage_ms,
+        )
+
+    def send(self, record: LoopRecord) -> None:
+        """Targets through the safety layer to the drives."""
+        start = time.perf_counter()
+        targets = self.interface.action_to_targets(record.action)
+        sent = self.drives.command(targets, record.t)
+        record.targets = {_key(j): float(v) for j, v in sent.items()}
+        record.stage_ms["command"] = 1e3 * (time.perf_counter() - start)
+
+    def receive(self, record: LoopRecord) -> None:
+        """The drives' state after the step; the watchdog and fault checks."""
+        start = time.perf_counter()
+        self._state = self.drives.read()
+        now = self.clock()
+        self.drives.feed_state(now)
+        self.drives.check(now)
+        record.stage_ms["read"] = 1e3 * (time.perf_counter() - start)
+        if self.on_record is not None:
+            self.on_record(record)
+
+
+class StatusLine:
+    """A one-line live status: loop rate, latency, ball estimate, faults."""
+
+    def __init__(self, write: Callable[[str], Any], every: int = 15) -> None:
+        self.write = write
+        self.every = every
+        self._count = 0
+        self._last_t: float | None = None
+        self._rate = 0.0
+
+    def __call__(self, record: LoopRecord) -> None:
+        if self._last_t is not None and record.t > self._last_t:
+            self._rate = 0.9 * self._rate + 0.1 / (record.t - self._last_t)
+        self._last_t = record.t
+        self._count += 1
+        if self._count % self.every:
+            return
+        ball = record.ball_measured
+        seen = f"ball ({ball[0]:+.3f}, {ball[1]:+.3f}) m" if ball else "ball not seen"
+        self.write(
+            f"\r{self._rate:5.1f} Hz | loop {record.loop_ms:5.1f} ms | {seen} | "
+            f"action {' '.join(f'{a:+.2f}' for a in record.action)} | faults: none   "
+        )

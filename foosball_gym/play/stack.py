@@ -1,0 +1,290 @@
+"""Putting the real-table stack together, for a real table or the simulated one.
+
+:func:`play` runs a policy on a table for a number of episodes (the simulated table serves a
+ball per episode) or for a while (the real table, where people serve). Both go through the
+same :class:`~foosball_gym.play.loop.PlayLoop`: camera, detector, Kalman filter, observation
+builder, policy, safety layer, CAN.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from foosball_gym import table as T
+from foosball_gym.envs.interface import TaskInterface
+from foosball_gym.estimation import BallFilter, TableStateEstimator
+from foosball_gym.hardware.config import TableConfig
+from foosball_gym.hardware.drives import TableDrives
+from foosball_gym.play.loop import STAGES, LoopRecord, PlayLoop, StatusLine
+from foosball_gym.play.session import SessionLog
+from foosball_gym.vision import (
+    CallableSource,
+    CameraCalibration,
+    ColourBallDetector,
+    OnnxBallDetector,
+    OpenCVSource,
+    RodTracker,
+    calibrate_from_frame,
+    calibrate_intrinsics,
+)
+
+
+@dataclass
+class PlayReport:
+    """What a session did: episodes and their outcome, and where the loop's time went."""
+
+    episodes: int = 0
+    successes: int = 0
+    goals_for: int = 0
+    goals_against: int = 0
+    steps: int = 0
+    stage_ms: dict[str, list[float]] = field(default_factory=lambda: {s: [] for s in STAGES})
+    ball_error_mm: list[float] = field(default_factory=list)
+
+    def add(self, record: LoopRecord) -> None:
+        self.steps += 1
+        for name, ms in record.stage_ms.items():
+            self.stage_ms[name].append(ms)
+
+    def timing_table(self) -> str:
+        rows = []
+        total = np.zeros(max(len(v) for v in self.stage_ms.values()) or 1)
+        for name in STAGES:
+            values = np.array(self.stage_ms[name]) if self.stage_ms[name] else np.zeros(1)
+            total[: len(values)] += values
+            rows.append(f"{name:9s} {np.median(values):7.2f} {np.percentile(values, 99):7.2f}")
+        rows.append(f"{'total':9s} {np.median(total):7.2f} {np.percentile(total, 99):7.2f}")
+        return "stage     median ms  p99 ms\n" + "\n".join(rows)
+
+    @property
+    def success_rate(self) -> float:
+        return self.successes / self.episodes if self.episodes else 0.0
+
+
+def build_perception(
+    config: TableConfig, interface: TaskInterface, latency_s: float | None
+) -> tuple[Any, Any, Callable[[np.ndarray], dict] | None, Any]:
+    """Detector, calibration, rod tracker and estimator from a table configuration."""
+    vision, camera, estimation = config.vision, config.camera, config.estimation
+    if not camera.get("calibration"):
+        raise ValueError(
+            "the table configuration has no camera calibration; run "
+            "`foosball calibrate --table CONFIG` first"
+        )
+    calibration = CameraCalibration.from_dict(camera["calibration"])
+    if vision.get("detector", "colour") == "onnx":
+        detector = OnnxBallDetector(vision["onnx_model"], **vision.get("onnx", {}))
+    else:
+        detector = ColourBallDetector(**vision.get("ball", {}))
+    # The camera follows the opponent's rods, and still obstacles where a task has them.
+    builder = interface.builder
+    tracked = [T.rod(name) for name in (*builder.opponent, *builder.extras)]
+    tracker = RodTracker(calibration, tracked, **vision.get("rods", {})) if tracked else None
+    latency = latency_s if latency_s is not None else estimation.get("latency_s", 0.03)
+    estimator = TableStateEstimator(
+        builder,
+        latency_s=latency,
+        ball=BallFilter(**estimation.get("ball", {})),
+        rod_measurement_std=estimation.get("rod_measurement_std", 0.003),
+    )
+    return detector, calibration, tracker, estimator
+
+
+def calibrate_table(
+    config: TableConfig,
+    frame: np.ndarray,
+    chessboard: list[np.ndarray] | None = None,
+    pattern: tuple[int, int] = (9, 6),
+    square: float = 0.025,
+    home_side: str = "left",
+) -> dict[str, Any]:
+    """Calibrate the camera and store the result in ``config.camera["calibration"]``.
+
+    Intrinsics come from chessboard views if given, else from the configuration's
+    ``camera.K`` / ``camera.dist``; the pose from the field's corners in ``frame``.
+
+    Returns:
+        A summary: the camera's position and, with a chessboard, the reprojection error.
+    """
+    summary: dict[str, Any] = {}
+    if chessboard:
+        K, dist, rms = calibrate_intrinsics(chessboard, pattern, square)
+        summary["chessboard_rms_px"] = round(rms, 3)
+        config.camera["K"], config.camera["dist"] = K.tolist(), dist.tolist()
+    elif "K" in config.camera:
+        K = np.asarray(config.camera["K"], dtype=float)
+        dist = np.asarray(config.camera.get("dist", [0.0] * 5), dtype=float)
+    else:
+        raise ValueError(
+            "no intrinsics: give chessboard images, or camera.K in the table configuration"
+        )
+    calibration = calibrate_from_frame(frame, K, dist, home_side)
+    config.camera["calibration"] = calibration.to_dict()
+    summary["camera_position_m"] = [round(float(v), 4) for v in calibration.centre]
+    return summary
+
+
+def play_real(
+    policy: Callable[[np.ndarray], Any],
+    interface: TaskInterface,
+    config: TableConfig,
+    duration_s: float | None,
+    log_path: str | None = None,
+    latency_s: float | None = None,
+    status: bool = True,
+) -> PlayReport:
+    """Play on a real table until ``duration_s`` passes or Ctrl-C; the drives are disabled on
+    the way out, whatever happens."""
+    detector, calibration, tracker, estimator = build_perception(config, interface, latency_s)
+    camera = config.camera
+    source = OpenCVSource(
+        camera.get("source", 0), camera.get("width"), camera.get("height"), camera.get("fps")
+    )
+    report = PlayReport()
+    hooks = [report.add]
+    log = SessionLog(log_path, _header(interface, config)) if log_path else None
+    if log is not None:
+        hooks.append(log)
+    if status:
+        hooks.append(StatusLine(sys.stderr.write))
+    period = config.control_period
+    try:
+        with TableDrives(config) as drives:
+            drives.bring_up()
+            loop = PlayLoop(
+                policy,
+                interface,
+                drives,
+                source,
+                detector,
+                calibration,
+                estimator,
+                tracker,
+                on_record=_fan_out(hooks),
+            )
+            loop.start()
+            end = None if duration_s is None else time.monotonic() + duration_s
+            next_tick = time.monotonic()
+            while end is None or time.monotonic() < end:
+                record = loop.decide()
+                loop.send(record)
+                next_tick += period
+                time.sleep(max(0.0, next_tick - time.monotonic()))
+                loop.receive(record)
+    finally:
+        source.close()
+        if log is not None:
+            log.close()
+    return report
+
+
+def play_sim(
+    policy: Callable[[np.ndarray], Any],
+    env_id: str,
+    env_kwargs: dict[str, Any],
+    episodes: int,
+    seed: int = 0,
+    log_path: str | None = None,
+    latency_s: float | None = 0.03,
+    status: bool = False,
+    camera_size: tuple[int, int] = (640, 360),
+) -> PlayReport:
+    """Play ``episodes`` served balls on the simulated table, through the whole stack."""
+    from foosball_gym.envs.interface import task_interface
+    from foosball_gym.sim_table.table import SimTable, sim_table_config
+
+    interface = task_interface(env_id, env_kwargs)
+    config = sim_table_config(interface)
+    table = SimTable(env_id, env_kwargs, config, seed=seed, camera_size=camera_size)
+    calibration = CameraCalibration.from_camera_model(table.camera_model)
+    config.camera["calibration"] = calibration.to_dict()
+    detector, calibration, tracker, estimator = build_perception(config, interface, latency_s)
+    source = CallableSource(table.frame, clock=lambda: table.time)
+    report = PlayReport()
+    hooks: list[Callable[[LoopRecord], None]] = [report.add]
+    log = SessionLog(log_path, _header(interface, config, env_id, env_kwargs)) if log_path else None
+    if log is not None:
+        hooks.append(log)
+    if status:
+        hooks.append(StatusLine(sys.stderr.write))
+    max_steps = gym.spec(env_id).max_episode_steps
+    try:
+        with TableDrives(config) as drives:
+            drives.bring_up()
+            loop = PlayLoop(
+                policy,
+                interface,
+                drives,
+                source,
+                detector,
+                calibration,
+                estimator,
+                tracker,
+                clock=lambda: table.time,
+                on_record=_fan_out(hooks),
+            )
+            table.step()  # the drives report their state once before the first decision
+            loop.start()
+            for _ in range(episodes):
+                table.serve()
+                for _ in range(max_steps):
+                    record = loop.decide()
+                    true_x, true_y, _, _ = table.ball()  # when the frame was taken
+                    loop.send(record)
+                    goal, out = table.step()
+                    loop.receive(record)
+                    if record.ball_measured is not None:
+                        report.ball_error_mm.append(
+                            1e3
+                            * float(
+                                np.hypot(
+                                    record.ball_measured[0] - true_x,
+                                    record.ball_measured[1] - true_y,
+                                )
+                            )
+                        )
+                    if goal or out:
+                        break
+                report.episodes += 1
+                report.successes += table.success
+                report.goals_for += table.goals_for
+                report.goals_against += table.goals_against
+    finally:
+        if log is not None:
+            log.close()
+        table.close()
+    return report
+
+
+def _fan_out(hooks: list[Callable[[LoopRecord], None]]) -> Callable[[LoopRecord], None]:
+    def call(record: LoopRecord) -> None:
+        for hook in hooks:
+            hook(record)
+
+    return call
+
+
+def _header(
+    interface: TaskInterface,
+    config: TableConfig,
+    env_id: str | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    with contextlib.suppress(Exception):
+        config_dict = config.to_dict()
+    return {
+        "env_id": env_id,
+        "env_kwargs": env_kwargs or {},
+        "observation": list(interface.builder.names),
+        "action": [f"{r}.{j}" for r, j in interface.action_joints],
+        "table": config_dict,
+        "started": time.time(),
+    }

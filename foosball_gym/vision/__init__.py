@@ -1,0 +1,40 @@
+"""Seeing the table: frame sources, calibration, ball detection, the opponent's rods.
+
+Needs OpenCV (``pip install "foosball_gym[hardware]"``); never the simulator.
+"""
+
+from foosball_gym.vision.calibration import (
+    FIELD_MARKERS,
+    calibrate_extrinsics,
+    calibrate_from_frame,
+    calibrate_intrinsics,
+    find_field_corners,
+)
+from foosball_gym.vision.detectors import (
+    BallDetector,
+    ColourBallDetector,
+    Detection,
+    OnnxBallDetector,
+    decode_yolo,
+)
+from foosball_gym.vision.projection import CameraCalibration
+from foosball_gym.vision.rods import RodTracker, fit_slide
+from foosball_gym.vision.sources import CallableSource, OpenCVSource
+
+__all__ = [
+    "FIELD_MARKERS",
+    "BallDetector",
+    "CallableSource",
+    "CameraCalibration",
+    "ColourBallDetector",
+    "Detection",
+    "OnnxBallDetector",
+    "OpenCVSource",
+    "RodTracker",
+    "calibrate_extrinsics",
+    "calibrate_from_frame",
+    "calibrate_intrinsics",
+    "decode_yolo",
+    "find_field_corners",
+    "fit_slide",
+]
