@@ -64,7 +64,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             seed=args.seed,
             self_play=args.self_play,
             normalize=not args.no_normalize,
-            normalize_reward=not args.no_normalize_reward,
+            normalize_reward=args.normalize_reward,
             vec_env=args.vec_env,
             eval_freq=args.eval_freq,
             eval_episodes=args.eval_episodes,
@@ -357,9 +357,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--no-normalize", action="store_true", help="do not normalise observations")
     p.add_argument(
-        "--no-normalize-reward",
+        "--normalize-reward",
         action="store_true",
-        help="do not scale rewards by the running spread of returns",
+        help="scale rewards by the running spread of returns",
     )
     p.add_argument(
         "--vec-env",

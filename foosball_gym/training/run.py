@@ -56,9 +56,7 @@ class TrainConfig:
     seed: int = 0
     self_play: bool | None = None  # None: on for two-player environments
     normalize: bool = True  # observations, by running mean and variance
-    # Rewards scaled by the running spread of returns: goals are worth ±1000, and unscaled
-    # value-loss gradients of that size would swamp the policy's under gradient clipping.
-    normalize_reward: bool = True
+    normalize_reward: bool = False  # scale rewards by the running spread of returns
     vec_env: str = "dummy"
     net_arch: tuple[int, ...] = (256, 128, 64)
     learning_rate: float = 1e-3
