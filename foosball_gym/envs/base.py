@@ -20,6 +20,7 @@ from gymnasium import spaces
 
 from foosball_gym import table as T
 from foosball_gym.envs.common import check_range
+from foosball_gym.envs.estimated import CameraNoise, EstimatedState
 from foosball_gym.envs.interface import Layout, TaskInterface
 from foosball_gym.envs.observations import (
     JOINT_SETS,
@@ -127,6 +128,14 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         ball_mass_range: the ball's mass in kg (spec: 0.022).
         drive_gain_range: a factor on the drives' position gains: how briskly they respond.
 
+    Robust training (off by default):
+        estimated_state: observe the ball and the opponent's rods as the real table does:
+            through a simulated camera and the real table's Kalman filter
+            (:mod:`foosball_gym.envs.estimated`).
+        camera_noise: the simulated camera's errors, keys of
+            :class:`~foosball_gym.envs.estimated.CameraNoise` (fps, position_std, rod_std,
+            drop_rate, hide_under_figurines, latency_s).
+
     Other:
         opponent: the away side's policy, a callable from the mirrored observation to an
             action (tasks with an opponent only; default: the scripted team).
@@ -182,6 +191,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         ball_restitution_range: tuple[float, float] | None = None,
         ball_mass_range: tuple[float, float] | None = None,
         drive_gain_range: tuple[float, float] | None = None,
+        estimated_state: bool = False,
+        camera_noise: dict[str, Any] | None = None,
         render_mode: str | None = None,
         render_width: int = 320,
         render_height: int = 180,
@@ -267,6 +278,13 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
 
         self.interface = TaskInterface.create(layout, extras, self.observation_options)
         self.obs_builder = self.interface.builder
+        self._estimated: EstimatedState | None = None
+        if _flag("estimated_state", estimated_state):
+            self._estimated = EstimatedState(
+                self.obs_builder, CameraNoise.from_dict(camera_noise), self.np_random
+            )
+        elif camera_noise is not None:
+            raise ValueError("camera_noise needs estimated_state=True")
         self.observation_space = self.obs_builder.space
         self._rewards = RewardComputer(self.weights, self._rods[:n_own])
 
@@ -390,9 +408,11 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             ball_velocity = check_pair("ball_velocity", ball_velocity)
         self._goals_for = self._goals_against = 0
         dynamics = self._randomise_dynamics()
+        if self._estimated is not None:
+            self._estimated.rng = self.np_random
         self._serve(self._sample_start(ball_position, ball_velocity, options))
         self._started = True
-        obs = self.obs_builder.build(self._pos, self._vel, self._ball)
+        obs = self._observe()
         info = {"goal": 0, "is_success": self._is_success(), **self._score_info()}
         if dynamics:
             info["dynamics"] = dynamics
@@ -449,6 +469,13 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self._read_state()
         self._still_steps = 0
         self._rewards.reset(self._controlled_slides(), self._ball[0], self._ball[1], self._n_act)
+        if self._estimated is not None:
+            self._estimated.reset(self._ball, self._pos, self.sim.figurine_positions())
+
+    def _observe(self) -> np.ndarray:
+        if self._estimated is not None:
+            return self._estimated.observation(self._pos, self._vel)
+        return self.obs_builder.build(self._pos, self._vel, self._ball)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if not self._started:
@@ -466,6 +493,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self.sim.command("position", targets)
         goal, out = self.sim.step()
         self._read_state()
+        if self._estimated is not None:
+            self._estimated.advance(self.dt, self._ball, self._pos, self.sim.figurine_positions())
         if goal == T.HOME_SCORED:
             self._goals_for += 1
         elif goal == T.AWAY_SCORED:
@@ -493,7 +522,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             info["reward_" + name] = terms[name]
         if continuous:
             self._serve(self._sample_start(None, None, {}))
-        obs = self.obs_builder.build(self._pos, self._vel, self._ball)
+        obs = self._observe()
         if self.render_mode == "human":
             self.render()
         return obs, float(sum(terms.values())), ended and not continuous, False, info

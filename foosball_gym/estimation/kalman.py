@@ -132,7 +132,7 @@ class RodFilter:
     """
 
     def __init__(
-        self, limit: float, measurement_std: float = 0.003, acceleration_std: float = 60.0
+        self, limit: float, measurement_std: float = 0.003, acceleration_std: float = 15.0
     ) -> None:
         self.limit = limit
         self.kf = KalmanFilter(dim_x=2, dim_z=1)

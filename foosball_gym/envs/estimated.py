@@ -1,0 +1,146 @@
+"""Observations as the real table makes them: a simulated camera and the real Kalman filter.
+
+With ``estimated_state=True`` an environment does not hand the policy the simulator's true ball
+and opponent rods. It passes them through a simulated camera (frame rate, detection noise,
+dropped detections, the ball hidden under a figurine's head, latency) and then through the very
+:class:`~foosball_gym.estimation.TableStateEstimator` that ``foosball play`` runs on the real
+table. The paper found that training on such estimates narrows the gap between simulation and
+the real table.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from foosball_gym import table as T
+from foosball_gym.envs.observations import ObservationBuilder
+
+
+@dataclass(frozen=True)
+class CameraNoise:
+    """How the simulated camera and detector err.
+
+    Attributes:
+        fps: frames per second (the paper's camera: up to 90).
+        position_std: standard deviation of a detected position on the table (m).
+        rod_std: standard deviation of a measured opponent rod position (m).
+        drop_rate: share of frames in which the detector misses a visible ball.
+        hide_under_figurines: the ball is not seen while a figurine's head covers it.
+        latency_s: from the frame to the drives acting (s); the filter predicts this far
+            ahead, as on the real table.
+    """
+
+    fps: float = 60.0
+    position_std: float = 0.002
+    rod_std: float = 0.003
+    drop_rate: float = 0.02
+    hide_under_figurines: bool = True
+    latency_s: float = 0.03
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any] | None) -> CameraNoise:
+        values = dict(values or {})
+        allowed = {f.name for f in fields(cls)}
+        unknown = set(values) - allowed
+        if unknown:
+            raise ValueError(
+                f"unknown camera_noise key(s) {sorted(unknown)}; allowed: "
+                f"{', '.join(sorted(allowed))}"
+            )
+        noise = cls(**values)
+        for name in ("fps",):
+            if not getattr(noise, name) > 0:
+                raise ValueError(
+                    f"camera_noise {name} must be positive, got {getattr(noise, name)}"
+                )
+        for name in ("position_std", "rod_std", "latency_s"):
+            if getattr(noise, name) < 0:
+                raise ValueError(f"camera_noise {name} must not be negative")
+        if not 0 <= noise.drop_rate < 1:
+            raise ValueError(f"camera_noise drop_rate must lie in [0, 1), got {noise.drop_rate}")
+        return noise
+
+
+class EstimatedState:
+    """The camera and filter between the simulator's true state and the policy.
+
+    Args:
+        builder: the task's observation builder.
+        noise: the camera's errors.
+        rng: the environment's random generator (so estimates are seeded too).
+    """
+
+    def __init__(
+        self, builder: ObservationBuilder, noise: CameraNoise, rng: np.random.Generator
+    ) -> None:
+        try:
+            from foosball_gym.estimation import TableStateEstimator
+        except ImportError as err:
+            raise ImportError(
+                f"estimated_state needs filterpy ({err.name} is missing): "
+                'pip install "foosball_gym[hardware]"'
+            ) from err
+        self._make = lambda: TableStateEstimator(builder, latency_s=noise.latency_s)
+        self.builder = builder
+        self.noise = noise
+        self.rng = rng
+        self.tracked = [*builder.opponent, *builder.extras]
+        self._slot = {name: builder.rods_in_play.index(name) for name in self.tracked}
+        self.estimator = self._make()
+        self._pending: deque[tuple[float, tuple[float, float] | None, dict]] = deque()
+        self._t = 0.0
+        self._next_frame = 0.0
+        self._ball_before: Sequence[float] = (0.0, 0.0, 0.0, 0.0)
+
+    def reset(self, ball: Sequence[float], pos: Sequence[float], figurines: np.ndarray) -> None:
+        """Start afresh; the first frame is taken now and seen at once."""
+        self.estimator = self._make()
+        self._pending.clear()
+        self._t = 0.0
+        self._next_frame = 1.0 / self.noise.fps
+        self._ball_before = ball
+        self.estimator.update(0.0, *self._measure(ball[0], ball[1], pos, figurines))
+
+    def advance(
+        self, dt: float, ball: Sequence[float], pos: Sequence[float], figurines: np.ndarray
+    ) -> None:
+        """The simulation moved on by ``dt``: take the frames that fell in it and feed the
+        filter those whose latency has passed."""
+        start, self._t = self._t, self._t + dt
+        bx0, by0 = self._ball_before[0], self._ball_before[1]
+        while self._next_frame <= self._t + 1e-12:
+            a = (self._next_frame - start) / dt
+            x, y = bx0 + a * (ball[0] - bx0), by0 + a * (ball[1] - by0)
+            self._pending.append((self._next_frame, *self._measure(x, y, pos, figurines)))
+            self._next_frame += 1.0 / self.noise.fps
+        self._ball_before = ball
+        while self._pending and self._pending[0][0] + self.noise.latency_s <= self._t + 1e-12:
+            self.estimator.update(*self._pending.popleft())
+
+    def _measure(
+        self, x: float, y: float, pos: Sequence[float], figurines: np.ndarray
+    ) -> tuple[tuple[float, float] | None, dict]:
+        noise, rng = self.noise, self.rng
+        slides = {
+            name: float(pos[i] + rng.normal(0.0, noise.rod_std)) for name, i in self._slot.items()
+        }
+        hidden = noise.hide_under_figurines and bool(
+            np.any(
+                (np.abs(figurines[:, 0] - x) < T.FIGURINE_SIZE[0] / 2)
+                & (np.abs(figurines[:, 1] - y) < T.FIGURINE_SIZE[1] / 2)
+            )
+        )
+        if hidden or rng.random() < noise.drop_rate:
+            return None, slides
+        return (
+            x + rng.normal(0.0, noise.position_std),
+            y + rng.normal(0.0, noise.position_std),
+        ), slides
+
+    def observation(self, pos: Sequence[float], vel: Sequence[float]) -> np.ndarray:
+        return self.estimator.observation(pos, vel)
