@@ -57,7 +57,7 @@ def test_detected_ball_is_within_3_mm_of_the_truth(sim, camera):
     _, calibration = camera
     detector = ColourBallDetector()
     rng = np.random.default_rng(0)
-    errors = []
+    errors, whole = [], []
     for _ in range(40):
         x, y = rng.uniform(-0.55, 0.55), rng.uniform(-0.3, 0.3)
         sim.reset(slide=[0.12, -0.12, 0.17, 0.11], ball_position=(x, y))
@@ -65,8 +65,22 @@ def test_detected_ball_is_within_3_mm_of_the_truth(sim, camera):
         assert detection is not None
         xy = calibration.pixel_to_table(np.array([detection.u, detection.v]))
         errors.append(1e3 * np.hypot(xy[0] - x, xy[1] - y))
-    # Measured: 0.4 mm mean; the worst cases are balls half hidden under a rod.
+        whole.append(detection.confidence > 0.99)
+    errors = np.array(errors)
+    print(f"ball error at {W}x{H}: mean {errors.mean():.2f} mm, max {errors.max():.2f} mm")
+    # Measured: 1.0 mm mean, 0.2 mm median, 0.4 mm at most for a ball seen whole; the worst
+    # cases (up to 12 mm) are balls partly hidden under a rod or a figurine.
     assert np.median(errors) < 1.0 and np.percentile(errors, 90) < 3.0
+    assert errors[np.array(whole)].max() < 1.0
+
+
+def test_the_ball_is_searched_near_its_last_place_first_and_found_after_a_jump(sim):
+    tracking, whole_frame = ColourBallDetector(roi_px=32), ColourBallDetector(roi_px=0)
+    for x, y in ((0.1, 0.1), (0.12, 0.09), (0.14, 0.08), (-0.4, -0.25), (-0.38, -0.25)):
+        sim.reset(ball_position=(x, y))
+        frame = bgr(sim)
+        near, anywhere = tracking.detect(frame), whole_frame.detect(frame)
+        assert near is not None and (near.u, near.v) == pytest.approx((anywhere.u, anywhere.v))
 
 
 def test_no_ball_no_detection(sim):
@@ -74,19 +88,36 @@ def test_no_ball_no_detection(sim):
     assert ColourBallDetector().detect(bgr(sim)) is None
 
 
-def test_opponent_rods_are_found_within_5_mm(sim, camera):
-    _, calibration = camera
+def rod_errors(sim, calibration, spin: float, seed: int, frames: int = 12) -> np.ndarray:
+    """Slide errors (mm) of the tracked opponent rods at random slides and spins."""
     tracker = RodTracker(calibration, [T.rod(n) for n in OPPONENT])
-    rng = np.random.default_rng(1)
+    rng = np.random.default_rng(seed)
     errors = []
-    for _ in range(20):
-        slides = [rng.uniform(-1, 1) * T.rod(n).slide_limit for n in ["home_keeper", *OPPONENT]]
-        sim.reset(slide=slides, ball_position=(0.0, 0.0))
+    for _ in range(frames):
+        rods = ["home_keeper", *OPPONENT]
+        slides = [rng.uniform(-1, 1) * T.rod(n).slide_limit for n in rods]
+        spins = list(rng.uniform(-spin, spin, len(rods)))
+        sim.reset(slide=slides, spin=spins, ball_position=(0.0, 0.0))
         seen = tracker(bgr(sim))
         for name, truth in zip(OPPONENT, slides[1:]):
             assert seen[name] is not None, name
             errors.append(1e3 * abs(seen[name] - truth))
-    assert max(errors) < 5.0
+    return np.array(errors)
+
+
+def test_opponent_rods_are_found_within_2_mm(sim, camera):
+    errors = rod_errors(sim, camera[1], spin=0.0, seed=1)
+    print(f"rod slide error, hanging: mean {errors.mean():.2f}, max {errors.max():.2f} mm")
+    # Measured: 0.25 mm mean, 0.7 mm at most.
+    assert errors.mean() < 1.0 and errors.max() < 2.0
+
+
+def test_spun_rods_are_found_within_8_mm(sim, camera):
+    errors = rod_errors(sim, camera[1], spin=np.pi, seed=2)
+    print(f"rod slide error, spun: mean {errors.mean():.2f}, max {errors.max():.2f} mm")
+    # A spun figurine's head and foot are not where a hanging one's are (see vision.rods).
+    # Measured: about 1 mm mean, 5 mm at most.
+    assert errors.mean() < 3.0 and errors.max() < 8.0
 
 
 def test_a_rod_with_a_hidden_figurine_is_still_placed():
@@ -94,6 +125,11 @@ def test_a_rod_with_a_hidden_figurine_is_still_placed():
     ys = rod.figurine_y(0.05)
     assert fit_slide(rod, [ys[0], ys[2]]) == pytest.approx(0.05, abs=1e-9)
     assert fit_slide(rod, [ys[1]]) is not None
+    # One figurine of the defense alone fits two rod positions; the last known one decides.
+    defense = T.rod("away_defense")
+    seen = [defense.figurine_y(0.1)[0]]
+    assert fit_slide(defense, seen, prior=0.05) == pytest.approx(0.1, abs=1e-9)
+    assert fit_slide(defense, seen, prior=-0.15) == pytest.approx(0.1 - 0.247, abs=1e-9)
 
 
 def test_the_camera_pose_is_recovered_from_the_field_corners(sim, camera):
@@ -152,6 +188,7 @@ def test_frames_are_read_from_a_video_file_and_from_a_function(tmp_path, sim):
     assert [round(t * 60) for t, _ in frames] == [1, 2, 3, 4, 5]
     t, frame = CallableSource(lambda: sim.render(W, H), clock=lambda: 1.5).read()
     assert t == 1.5 and ColourBallDetector().detect(frame) is not None
+    assert CallableSource(lambda: None).read() is None  # the function's frames ran out
     with pytest.raises(FileNotFoundError):
         OpenCVSource(str(tmp_path / "missing.mp4"))
 

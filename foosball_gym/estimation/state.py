@@ -52,9 +52,20 @@ class TableStateEstimator:
         ball_xy: tuple[float, float] | None,
         rod_slides: Mapping[str, float | None] | None = None,
     ) -> None:
-        """Take one frame's measurements (None where nothing was seen)."""
-        self.ball.update(t, ball_xy)
+        """Take one frame's measurements (None where nothing was seen).
+
+        Args:
+            t: when the frame was taken (s).
+            ball_xy: the detected ball on the table (m), or None.
+            rod_slides: measured slide values of tracked rods (a rod left out: not seen).
+        """
         slides = rod_slides or {}
+        unknown = set(slides) - set(self.rods)
+        if unknown:
+            raise ValueError(
+                f"no tracked rod called {sorted(unknown)}; tracked: {', '.join(self.rods)}"
+            )
+        self.ball.update(t, ball_xy)
         for name, rod_filter in self.rods.items():
             rod_filter.update(t, slides.get(name))
 

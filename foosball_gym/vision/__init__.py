@@ -19,7 +19,7 @@ from foosball_gym.vision.detectors import (
 )
 from foosball_gym.vision.projection import CameraCalibration
 from foosball_gym.vision.rods import RodTracker, fit_slide
-from foosball_gym.vision.sources import CallableSource, OpenCVSource
+from foosball_gym.vision.sources import CallableSource, FrameSource, OpenCVSource
 
 __all__ = [
     "FIELD_MARKERS",
@@ -28,6 +28,7 @@ __all__ = [
     "CameraCalibration",
     "ColourBallDetector",
     "Detection",
+    "FrameSource",
     "OnnxBallDetector",
     "OpenCVSource",
     "RodTracker",

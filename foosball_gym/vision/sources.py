@@ -9,9 +9,20 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Protocol
 
 import cv2
 import numpy as np
+
+
+class FrameSource(Protocol):
+    """Where the play loop's frames come from."""
+
+    def read(self) -> tuple[float, np.ndarray] | None:
+        """The next frame as (timestamp in seconds, BGR image), or None at the end."""
+        ...
+
+    def close(self) -> None: ...
 
 
 class OpenCVSource:
@@ -63,7 +74,7 @@ class CallableSource:
     """Frames from a function returning RGB images, e.g. ``TableSim.render``.
 
     Args:
-        render: returns an (H, W, 3) uint8 RGB frame.
+        render: returns an (H, W, 3) uint8 RGB frame, or None when there are no more.
         clock: the frame's timestamp (default: ``time.monotonic``); the simulated table passes
             its simulated time.
     """
@@ -74,8 +85,9 @@ class CallableSource:
         self.render = render
         self.clock = clock
 
-    def read(self) -> tuple[float, np.ndarray]:
-        return self.clock(), cv2.cvtColor(self.render(), cv2.COLOR_RGB2BGR)
+    def read(self) -> tuple[float, np.ndarray] | None:
+        t, frame = self.clock(), self.render()
+        return None if frame is None else (t, cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
 
     def close(self) -> None:
         pass
