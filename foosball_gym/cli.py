@@ -74,7 +74,14 @@ def cmd_train(args: argparse.Namespace) -> int:
             selfplay_pool=args.selfplay_pool,
             target_success=args.target_success,
         )
-        for name in ("n_steps", "batch_size", "learning_rate", "log_std_init"):
+        for name in (
+            "n_steps",
+            "batch_size",
+            "learning_rate",
+            "log_std_init",
+            "lr_schedule",
+            "target_kl",
+        ):
             if getattr(args, name) is not None:
                 setattr(config, name, getattr(args, name))
         out = Path(args.out or f"runs/{config.env_id}-seed{config.seed}")
@@ -370,6 +377,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-steps", type=_positive_int, help="PPO horizon per environment (128)")
     p.add_argument("--batch-size", type=_positive_int, help="minibatch size (256)")
     p.add_argument("--learning-rate", type=float, help="learning rate (1e-3)")
+    p.add_argument(
+        "--lr-schedule",
+        choices=["constant", "linear"],
+        help="constant, or linear decay to 0 over --timesteps (constant)",
+    )
+    p.add_argument(
+        "--target-kl",
+        type=float,
+        help="end an update's epochs once the policy moved this far (off)",
+    )
     p.add_argument(
         "--log-std-init", type=float, help="PPO's initial log standard deviation of actions (0)"
     )

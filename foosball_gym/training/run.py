@@ -35,6 +35,7 @@ from foosball_gym.training.snapshot import PolicySnapshot
 
 ALGOS = {"ppo": PPO, "sac": SAC}
 VEC_ENVS = {"dummy": DummyVecEnv, "subproc": SubprocVecEnv}
+LR_SCHEDULES = ("constant", "linear")
 CONFIG_FILE = "config.json"
 MODEL_FILE = "model.zip"
 NORM_FILE = "vecnormalize.pkl"
@@ -67,6 +68,8 @@ class TrainConfig:
     gae_lambda: float = 0.95
     clip_range: float = 0.2
     log_std_init: float = 0.0  # initial log std of PPO's Gaussian actions (SB3's default)
+    lr_schedule: str = "constant"  # or "linear": decay to 0 over the run
+    target_kl: float | None = None  # stop an update's epochs once the policy moved this far
     selfplay_window: int = 100
     selfplay_threshold: float = 0.2
     selfplay_pool: int = 1
@@ -100,6 +103,12 @@ class TrainConfig:
         ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise ValueError(
+                f"unknown lr_schedule {self.lr_schedule!r}; allowed: {', '.join(LR_SCHEDULES)}"
+            )
+        if self.target_kl is not None and not self.target_kl > 0:
+            raise ValueError(f"target_kl must be positive, got {self.target_kl}")
         if self.target_success is not None and not 0 < self.target_success <= 1:
             raise ValueError(f"target_success must lie in (0, 1], got {self.target_success}")
         env = gym.make(self.env_id, **self.env_kwargs)  # raises on a bad env option
@@ -144,15 +153,20 @@ def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
         n = venv.action_space.shape[0] // 2
         venv = SelfPlayVecEnv(venv, lambda obs: np.zeros((len(obs), n), np.float32), config.seed)
     if config.normalize or config.normalize_reward:
-        venv = VecNormalize(venv, norm_obs=config.normalize, norm_reward=config.normalize_reward,
-                            gamma=config.gamma)
+        venv = VecNormalize(
+            venv, norm_obs=config.normalize, norm_reward=config.normalize_reward, gamma=config.gamma
+        )
     return venv
 
 
 def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
     policy_kwargs = {"net_arch": list(config.net_arch)}
+    lr = config.learning_rate
     common = {
-        "learning_rate": config.learning_rate,
+        # SB3 calls a schedule with the progress remaining, from 1 down to 0.
+        "learning_rate": (lambda remaining: lr * remaining)
+        if config.lr_schedule == "linear"
+        else lr,
         "gamma": config.gamma,
         "seed": config.seed,
         "device": "cpu",
@@ -169,6 +183,7 @@ def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
             n_epochs=config.n_epochs,
             gae_lambda=config.gae_lambda,
             clip_range=config.clip_range,
+            target_kl=config.target_kl,
             policy_kwargs=policy_kwargs,
             **common,
         )
