@@ -81,6 +81,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             "log_std_init",
             "lr_schedule",
             "target_kl",
+            "pretrain_episodes",
         ):
             if getattr(args, name) is not None:
                 setattr(config, name, getattr(args, name))
@@ -381,6 +382,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--lr-schedule",
         choices=["constant", "linear"],
         help="constant, or linear decay to 0 over --timesteps (constant)",
+    )
+    p.add_argument(
+        "--pretrain-episodes",
+        type=int,
+        metavar="N",
+        help="first clone the scripted baseline from N episodes (off)",
     )
     p.add_argument(
         "--target-kl",

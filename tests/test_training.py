@@ -243,3 +243,41 @@ def test_envs_lists_every_environment_with_its_options(capsys):
         assert env_id in out
     assert "ball_start = 'resting'  one of 'resting', 'incoming'" in out
     assert "continuous = False" in out
+
+
+def test_pretraining_clones_the_scripted_keeper(tmp_path):
+    from foosball_gym.training.pretrain import collect
+
+    demos = collect("Foosball-Block-v0", {}, episodes=5, gamma=0.99)
+    assert demos.observations.shape[1] == 6 and len(demos.actions) == len(demos.returns)
+    assert demos.success_rate >= 0.6
+    run = tmp_path / "bc"
+    assert (
+        main(
+            [
+                "train",
+                "Foosball-Block-v0",
+                "--timesteps",
+                "512",
+                "--eval-freq",
+                "512",
+                "--pretrain-episodes",
+                "100",
+                "--log-std-init",
+                "-2",
+                "--learning-rate",
+                "1e-5",
+                "--out",
+                str(run),
+                *SMALL,
+            ]
+        )
+        == 0
+    )
+    record = json.loads((run / "pretrain.json").read_text())
+    assert record["episodes"] == 100 and record["action_mse"] < 0.05
+    # Barely trained by PPO, the clone already blocks like the scripted keeper.
+    clone = load_policy(run).policy
+    result = evaluate(clone, "Foosball-Block-v0", episodes=40, seed=500)
+    zero = evaluate(lambda obs: np.zeros(1, np.float32), "Foosball-Block-v0", episodes=40, seed=500)
+    assert result.success_rate >= zero.success_rate + 0.25

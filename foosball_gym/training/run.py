@@ -30,6 +30,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNorm
 
 import foosball_gym  # noqa: F401  (registers the ids)
 from foosball_gym.training.evaluation import evaluate
+from foosball_gym.training.pretrain import clone, collect
 from foosball_gym.training.selfplay import OpponentActionWrapper, SelfPlayCallback, SelfPlayVecEnv
 from foosball_gym.training.snapshot import PolicySnapshot
 
@@ -70,6 +71,8 @@ class TrainConfig:
     log_std_init: float = 0.0  # initial log std of PPO's Gaussian actions (SB3's default)
     lr_schedule: str = "constant"  # or "linear": decay to 0 over the run
     target_kl: float | None = None  # stop an update's epochs once the policy moved this far
+    # Behaviour-clone the scripted baseline from this many episodes before learning (0: off).
+    pretrain_episodes: int = 0
     selfplay_window: int = 100
     selfplay_threshold: float = 0.2
     selfplay_pool: int = 1
@@ -383,6 +386,22 @@ def train(
             wall_offset = rows[-1]["wall_seconds"] if rows else 0.0
     else:
         model = build_model(config, venv, out / "tb")
+        if config.pretrain_episodes:
+            demos = collect(
+                config.env_id,
+                config.env_kwargs,
+                config.pretrain_episodes,
+                config.gamma,
+                seed=config.seed,
+            )
+            fit = clone(model, demos, seed=config.seed)
+            record = {
+                "episodes": config.pretrain_episodes,
+                "samples": len(demos.actions),
+                "scripted_success_rate": demos.success_rate,
+                **fit,
+            }
+            _atomic_write_text(out / "pretrain.json", json.dumps(record, indent=2))
 
     own: list[BaseCallback] = [CheckpointCallback(out, config.checkpoint_freq)]
     if config.self_play:
