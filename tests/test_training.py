@@ -56,6 +56,7 @@ def test_cli_trains_block_and_the_result_evaluates_through_the_cli(tmp_path, cap
         "eval.csv",
         "eval.png",
         "checkpoints/latest.json",
+        "best/model.zip",
     ):
         assert (run / name).exists(), name
     assert list((run / "tb").rglob("events.out.tfevents.*"))

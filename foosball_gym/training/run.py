@@ -7,6 +7,7 @@ A run directory holds::
     vecnormalize.pkl       observation-normalisation statistics, if used
     checkpoints/           periodic checkpoints, written atomically; latest.json names the last
     eval.csv, eval.png     the evaluation curve: success rate and reward against timesteps
+    best/                  the model of the best evaluation so far
     tb/                    TensorBoard logs
     selfplay/              opponent snapshots and history.json (self-play runs)
 """
@@ -40,6 +41,7 @@ LR_SCHEDULES = ("constant", "linear")
 CONFIG_FILE = "config.json"
 MODEL_FILE = "model.zip"
 NORM_FILE = "vecnormalize.pkl"
+BEST_DIR = "best"
 
 
 @dataclass
@@ -196,7 +198,8 @@ def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
 
 
 class EvalCurveCallback(BaseCallback):
-    """Every ``eval_freq`` steps: evaluate on seeded episodes, append to eval.csv, plot."""
+    """Every ``eval_freq`` steps: evaluate on seeded episodes, append to eval.csv, plot, and
+    keep the best model so far in ``best/`` (PPO's success rate can fall back after a peak)."""
 
     FIELDS = (
         "timesteps",
@@ -215,6 +218,11 @@ class EvalCurveCallback(BaseCallback):
         self.config = config
         self.csv = out / "eval.csv"
         self.png = out / "eval.png"
+        self.best_dir = out / BEST_DIR
+        best_file = self.best_dir / "best.json"
+        self.best = (
+            json.loads(best_file.read_text())["success_rate"] if best_file.exists() else -1.0
+        )
         self.wall_offset = wall_offset
         self._start = time.perf_counter()
         self._next = 0
@@ -259,6 +267,11 @@ class EvalCurveCallback(BaseCallback):
         self.logger.record("eval/success_rate", res.success_rate)
         self.logger.record("eval/mean_reward", res.mean_reward)
         plot_curve(self.csv, self.png, self.config.env_id)
+        if res.success_rate >= self.best:
+            self.best = res.success_rate
+            self.best_dir.mkdir(exist_ok=True)
+            save_model(self.model, self.best_dir / MODEL_FILE, self.best_dir / NORM_FILE)
+            _atomic_write_text(self.best_dir / "best.json", json.dumps(row))
         target = self.config.target_success
         if target is not None and res.success_rate >= target:
             self.reached = row
