@@ -440,8 +440,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["scripted"],
         help="evaluate the scripted baseline of the environment TARGET",
     )
-    p.add_argument("--env", help="environment id, where the model's run does not say it")
-    p.add_argument("--env-kwarg", action="append", metavar="KEY=VALUE")
+    _add_env_arguments(p)
     p.add_argument("--episodes", type=_positive_int, default=100)
     p.add_argument("--seed", type=int, default=0, help="first episode's seed")
     p.add_argument(
@@ -467,8 +466,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="CONFIG.yaml|sim",
         help="the table configuration, or 'sim' for the simulated table",
     )
-    p.add_argument("--env", help="environment id, where the model does not say it")
-    p.add_argument("--env-kwarg", action="append", metavar="KEY=VALUE")
+    _add_env_arguments(p)
     p.add_argument(
         "--episodes",
         type=_positive_int,
@@ -519,6 +517,16 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("envs", help="list the environments and their options")
     p.set_defaults(func=cmd_envs)
     return parser
+
+
+def _add_env_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--env", help="environment id, where the model does not say it")
+    parser.add_argument(
+        "--env-kwarg",
+        action="append",
+        metavar="KEY=VALUE",
+        help="an environment option (repeatable)",
+    )
 
 
 def _size(text: str) -> tuple[int, int]:

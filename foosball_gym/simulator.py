@@ -335,9 +335,7 @@ class TableSim:
         self.place_ball(ball_position, ball_velocity)
         self.command("position", [*slide, *spin])
 
-    def place_ball(
-        self, position: Sequence[float], velocity: Sequence[float] = (0.0, 0.0)
-    ) -> None:
+    def place_ball(self, position: Sequence[float], velocity: Sequence[float] = (0.0, 0.0)) -> None:
         """Put the ball somewhere, leaving the rods as they are (a serve in a running game).
 
         Args:

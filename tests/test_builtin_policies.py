@@ -20,9 +20,14 @@ def test_every_promised_policy_is_shipped():
     assert SHIPPED <= set(builtin_names())
 
 
-@pytest.mark.parametrize("name, episodes", [
-    ("block", 40), ("score-resting", 40), ("score-incoming", 40),
-])
+@pytest.mark.parametrize(
+    "name, episodes",
+    [
+        ("block", 40),
+        ("score-resting", 40),
+        ("score-incoming", 40),
+    ],
+)
 def test_a_shipped_policy_does_at_least_as_well_as_the_scripted_baseline(name, episodes):
     import gymnasium as gym
 

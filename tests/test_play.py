@@ -94,7 +94,7 @@ def test_a_logged_session_replays_to_the_same_decisions(tmp_path):
     interface = task_interface("Foosball-Block-v0")
     config = sim_table_config(interface)
     config.camera["calibration"] = header["table"]["camera"]["calibration"]
-    _, _, _, estimator = build_perception(config, interface, 0.03)
+    _, _, estimator, _ = build_perception(config, interface, 0.03)
     n = len(interface.builder.rods_in_play)
 
     def own_joints(state):

@@ -72,7 +72,8 @@ class PlayReport:
 def build_perception(
     config: TableConfig, interface: TaskInterface, latency_s: float | None
 ) -> tuple[Any, Any, Callable[[np.ndarray], dict] | None, Any]:
-    """Detector, calibration, rod tracker and estimator from a table configuration."""
+    """Detector, calibration, estimator and rod tracker (None without an opponent) from a
+    table configuration: the perception arguments of :class:`PlayLoop`, in its order."""
     vision, camera, estimation = config.vision, config.camera, config.estimation
     if not camera.get("calibration"):
         raise ValueError(
@@ -95,7 +96,7 @@ def build_perception(
         ball=BallFilter(**estimation.get("ball", {})),
         rod_measurement_std=estimation.get("rod_measurement_std", 0.003),
     )
-    return detector, calibration, tracker, estimator
+    return detector, calibration, estimator, tracker
 
 
 def calibrate_table(
@@ -143,33 +144,18 @@ def play_real(
 ) -> PlayReport:
     """Play on a real table until ``duration_s`` passes or Ctrl-C; the drives are disabled on
     the way out, whatever happens."""
-    detector, calibration, tracker, estimator = build_perception(config, interface, latency_s)
+    perception = build_perception(config, interface, latency_s)
     camera = config.camera
     source = OpenCVSource(
         camera.get("source", 0), camera.get("width"), camera.get("height"), camera.get("fps")
     )
     report = PlayReport()
-    hooks = [report.add]
-    log = SessionLog(log_path, _header(interface, config)) if log_path else None
-    if log is not None:
-        hooks.append(log)
-    if status:
-        hooks.append(StatusLine(sys.stderr.write))
+    on_record, log = _recorders(report, log_path, _header(interface, config), status)
     period = config.control_period
     try:
         with TableDrives(config) as drives:
             drives.bring_up()
-            loop = PlayLoop(
-                policy,
-                interface,
-                drives,
-                source,
-                detector,
-                calibration,
-                estimator,
-                tracker,
-                on_record=_fan_out(hooks),
-            )
+            loop = PlayLoop(policy, interface, drives, source, *perception, on_record=on_record)
             loop.start()
             end = None if duration_s is None else time.monotonic() + duration_s
             next_tick = time.monotonic()
@@ -206,15 +192,11 @@ def play_sim(
     table = SimTable(env_id, env_kwargs, config, seed=seed, camera_size=camera_size)
     calibration = CameraCalibration.from_camera_model(table.camera_model)
     config.camera["calibration"] = calibration.to_dict()
-    detector, calibration, tracker, estimator = build_perception(config, interface, latency_s)
+    perception = build_perception(config, interface, latency_s)
     source = CallableSource(table.frame, clock=lambda: table.time)
     report = PlayReport()
-    hooks: list[Callable[[LoopRecord], None]] = [report.add]
-    log = SessionLog(log_path, _header(interface, config, env_id, env_kwargs)) if log_path else None
-    if log is not None:
-        hooks.append(log)
-    if status:
-        hooks.append(StatusLine(sys.stderr.write))
+    header = _header(interface, config, env_id, env_kwargs)
+    on_record, log = _recorders(report, log_path, header, status)
     max_steps = gym.spec(env_id).max_episode_steps
     try:
         with TableDrives(config) as drives:
@@ -224,12 +206,9 @@ def play_sim(
                 interface,
                 drives,
                 source,
-                detector,
-                calibration,
-                estimator,
-                tracker,
+                *perception,
                 clock=lambda: table.time,
-                on_record=_fan_out(hooks),
+                on_record=on_record,
             )
             table.step()  # the drives report their state once before the first decision
             loop.start()
@@ -264,12 +243,22 @@ def play_sim(
     return report
 
 
-def _fan_out(hooks: list[Callable[[LoopRecord], None]]) -> Callable[[LoopRecord], None]:
-    def call(record: LoopRecord) -> None:
-        for hook in hooks:
-            hook(record)
+def _recorders(
+    report: PlayReport, log_path: str | None, header: dict[str, Any], status: bool
+) -> tuple[Callable[[LoopRecord], None], SessionLog | None]:
+    """What every loop record goes to: the report, the session log, the status line."""
+    hooks: list[Callable[[LoopRecord], None]] = [report.add]
+    log = SessionLog(log_path, header) if log_path else None
+    if log is not None:
+        hooks.append(log)
+    if status:
+        hooks.append(StatusLine(sys.stderr.write))
 
-    return call
+    def record(entry: LoopRecord) -> None:
+        for hook in hooks:
+            hook(entry)
+
+    return record, log
 
 
 def _header(
