@@ -25,6 +25,7 @@ from foosball_gym.sim_table.drives import SimulatedDrives
 # round, so that a sign error anywhere between policy and rod shows.
 SLIDE_INCREMENTS_PER_M = 90_000.0
 SPIN_INCREMENTS_PER_RAD = 3600 / (2 * np.pi)
+SIM_HEARTBEAT_TIMEOUT_S = 1.0
 _channels = itertools.count()
 
 
@@ -49,11 +50,14 @@ def sim_table_config(interface: TaskInterface, mode: str = "csp") -> TableConfig
             )
             node += 1
     channel = f"foosball-sim-{os.getpid()}-{next(_channels)}"
+    # The simulated drives beat their heartbeats from threads of this very process, which
+    # rendering the camera's frames can hold up for tens of milliseconds on a busy machine.
     return TableConfig(
         joints=joints,
         bus=BusConfig(interface="virtual", channel=channel),
         control_hz=float(T.CONTROL_HZ),
         mode=mode,
+        heartbeat_timeout_s=SIM_HEARTBEAT_TIMEOUT_S,
     )
 
 
