@@ -167,6 +167,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         return {
             "joint_velocities": (True, False),
             "observe_figurines": (False, True),
+            "estimated_state": (False, True),
             **cls.task_options,
         }
 
