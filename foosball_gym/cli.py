@@ -32,6 +32,23 @@ def parse_env_kwargs(items: Sequence[str] | None) -> dict[str, Any]:
     return out
 
 
+def _scripted(env_id: str, env_kwargs: dict[str, Any]) -> Any:
+    """The scripted baseline of an environment."""
+    import gymnasium as gym
+
+    if env_id not in gym.registry:
+        raise CliError(
+            f"unknown environment {env_id!r}; registered: {', '.join(foosball_gym.ENV_IDS)}"
+        )
+    try:
+        env = gym.make(env_id, **env_kwargs)
+    except (ValueError, TypeError) as err:
+        raise CliError(str(err)) from None
+    policy = env.unwrapped.scripted_policy()
+    env.close()
+    return policy
+
+
 def _load(spec: str) -> Any:
     from foosball_gym.training.models import ModelLoadError, load_policy
 
@@ -103,21 +120,13 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
-    import gymnasium as gym
 
     from foosball_gym.training.evaluation import evaluate
 
     env_kwargs = parse_env_kwargs(args.env_kwarg)
     if args.policy == "scripted":
         env_id = args.target
-        if env_id not in gym.registry:
-            raise CliError(
-                f"unknown environment {env_id!r}; registered: {', '.join(foosball_gym.ENV_IDS)}"
-            )
-        probe = gym.make(env_id, **env_kwargs)
-        policy = probe.unwrapped.scripted_policy()
-        probe.close()
-        name = "scripted"
+        policy, name = _scripted(env_id, env_kwargs), "scripted"
     else:
         loaded = _load(args.target)
         env_id = args.env or loaded.env_id
@@ -162,16 +171,7 @@ def _policy_for_play(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]
     if args.model == "scripted":
         if not args.env:
             raise CliError("the scripted policy needs --env ENV_ID")
-        import gymnasium as gym
-
-        if args.env not in gym.registry:
-            raise CliError(
-                f"unknown environment {args.env!r}; registered: {', '.join(foosball_gym.ENV_IDS)}"
-            )
-        probe = gym.make(args.env, **env_kwargs)
-        policy = probe.unwrapped.scripted_policy()
-        probe.close()
-        return policy, args.env, env_kwargs
+        return _scripted(args.env, env_kwargs), args.env, env_kwargs
     loaded = _load(args.model)
     env_id = args.env or loaded.env_id
     if env_id is None:
