@@ -453,10 +453,6 @@ class TableSim:
         pos, _ = self.joint_states()
         return figurine_centres(self.rods, pos[: self._n], pos[self._n :])
 
-    def contact_count(self) -> int:
-        """How many contact points the ball has right now (for tests and debugging)."""
-        return len(self._p.getContactPoints(self.ball))
-
     # ----------------------------------------------------------------------------- output
 
     def camera(self, width: int, height: int) -> CameraModel:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -48,7 +48,6 @@ class Start:
     spin: list[float]
     ball_position: tuple[float, float]
     ball_velocity: tuple[float, float]
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 def check_pair(name: str, value: Any) -> tuple[float, float]:

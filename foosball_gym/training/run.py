@@ -464,11 +464,3 @@ def _load_checkpoint(config: TrainConfig, out: Path, venv: Any) -> tuple[Any, in
         tensorboard_log=str(out / "tb"),
     )
     return model, int(pointer["timesteps"])
-
-
-def env_is_two_player(env_id: str, env_kwargs: dict[str, Any] | None = None) -> bool:
-    env = gym.make(env_id, **(env_kwargs or {}))
-    try:
-        return bool(env.unwrapped.layout.opponent)
-    finally:
-        env.close()
