@@ -102,7 +102,7 @@ class ObservationBuilder:
 
         names: list[str] = []
         take: list[int] = []
-        self._figurine_blocks: list[tuple[int, tuple[int, ...], bool, bool]] = []
+        self._figurine_blocks: list[tuple[int, tuple[tuple[int, T.Rod], ...], bool, bool]] = []
         for side, rods, joints in (
             ("own", self.own, own_joints),
             ("opponent", self.opponent, opp_joints),
@@ -114,7 +114,12 @@ class ObservationBuilder:
                 if options.joint_velocities:
                     names += self._figurine_names(rods, y_only, velocities=True)
                 self._figurine_blocks.append(
-                    (start, tuple(self._index[r] for r in rods), y_only, options.joint_velocities)
+                    (
+                        start,
+                        tuple((self._index[r], T.rod(r)) for r in rods),
+                        y_only,
+                        options.joint_velocities,
+                    )
                 )
                 take += [-1] * (len(names) - start)
                 continue
@@ -187,8 +192,7 @@ class ObservationBuilder:
         n = self._n
         for start, rod_idx, y_only, velocities in self._figurine_blocks:
             values, rates = [], []
-            for k in rod_idx:
-                rod = T.rod(self.rods_in_play[k])
+            for k, rod in rod_idx:
                 d = rod.direction * self._sign
                 s, a, sv, av = pos[k], pos[n + k], vel[k], vel[n + k]
                 r = T.FIGURINE_CENTRE_BELOW_AXIS
