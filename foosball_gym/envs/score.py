@@ -17,6 +17,7 @@ from foosball_gym.envs.common import (
     shot_at_goal,
 )
 from foosball_gym.envs.interface import Layout
+from foosball_gym.policies.scripted import ScriptedTeam
 
 BALL_STARTS = ("resting", "incoming")
 OBSTACLES = ("away_keeper", "away_defense", "away_offense")
@@ -134,6 +135,12 @@ class ScoreEnv(FoosballEnv):
                 f"got {given!r}"
             )
         return values
+
+    def scripted_policy(self) -> ScriptedTeam:
+        """The scripted keeper, striking incoming balls (blocked ones trickle out of reach)
+        and aiming past the obstacles."""
+        names, rods = self.obs_builder.names, self.layout.controlled
+        return ScriptedTeam(names, rods, "both", volley=True, aim=True)
 
     def success(self, goals_for: int, goals_against: int) -> bool:
         return goals_for > 0

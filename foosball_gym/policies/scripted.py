@@ -14,13 +14,20 @@ from collections.abc import Sequence
 import numpy as np
 
 from foosball_gym import table as T
+from foosball_gym.policies.aiming import offset_for_angle, plan_shot
 
 _WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
 # How far in front of a rod (ball centre minus rod x) a swing of the foot reaches the ball.
 _REACH_NEAR = T.FIGURINE_SIZE[0] / 2 + T.BALL_RADIUS - 0.004
 _REACH_FAR = 0.075
+_SLOW = 1.5  # m/s: a ball slower than this in reach gets kicked
 KICK_ANGLE = math.pi / 2  # spin target of a kick: the feet swing through and end up in front
 WIND_UP_ANGLE = -math.pi / 2  # feet raised behind the rod, clear of the ball
+# A swing from the wind-up takes about 32 ms to bring the feet down (torque-limited), so a
+# volley starts when the ball is this many seconds from the feet.
+VOLLEY_LEAD = 0.035
+VOLLEY_WINDOW = 0.25
+VOLLEY_MIN_SPEED = 2.0  # slower balls are stopped first, then kicked
 
 
 def fold_into_walls(y: float, half_width: float = _WALL) -> float:
@@ -69,6 +76,11 @@ class ScriptedTeam:
             rods (``away_*`` in its mirrored observation) play as the home rods of that role.
         joints: ``"slide"`` (one action per rod) or ``"both"`` (slide, spin per rod).
         kick: shoot balls in reach (only with ``joints="both"``).
+        aim: kick past the other team's figurines that the observation places (and into the
+            goal mouth), with a corner of the foot for an angled shot or off a side wall.
+        volley: strike fast balls coming at a rod instead of blocking them (with ``kick``).
+            It scores more from shots but concedes the ones it mistimes, so it suits
+            attacking tasks, not defending.
     """
 
     def __init__(
@@ -77,12 +89,15 @@ class ScriptedTeam:
         rods: Sequence[str] = ("home_keeper",),
         joints: str = "slide",
         kick: bool = True,
+        volley: bool = False,
+        aim: bool = False,
     ) -> None:
         if joints not in ("slide", "both"):
             raise ValueError(f"joints must be 'slide' or 'both', got {joints!r}")
         self.rods = tuple(_home_rod(r) for r in rods)
         self.joints = joints
         self.kick = kick and joints == "both"
+        self.volley = volley and self.kick
         self._ball = [_find(names, n) for n in ("ball_x", "ball_y", "ball_vx", "ball_vy")]
         names = list(names)
         # The rods' own joint values, where the observation holds them, let a kick wind up.
@@ -92,17 +107,34 @@ class ScriptedTeam:
             ok = slide in names and spin in names
             self._own.append((names.index(slide), names.index(spin)) if ok else None)
         self.n_actions = len(self.rods) * (2 if joints == "both" else 1)
+        # The other team's rods the observation places, as the home side sees them.
+        other = T.HOME if str(rods[0]).startswith(T.AWAY) else T.AWAY
+        self._blockers = []
+        if aim and self.kick:
+            for role in T.ROLES:
+                name = f"{other}_{role}_slide_pos"
+                if name in names:
+                    self._blockers.append((T.rod(f"{T.AWAY}_{role}"), names.index(name)))
+        self.aim = bool(aim and self.kick)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         x, y, vx, vy = (float(obs[i]) for i in self._ball)
         out = []
         for rod, own in zip(self.rods, self._own):
             target = self.target_y(rod, x, y, vx, vy)
+            offset = 0.0
+            if self.aim and self._in_reach(rod, x, vx, vy):
+                blockers = [(r.x, r.figurine_y(float(obs[i]))) for r, i in self._blockers]
+                offset = offset_for_angle(plan_shot(x, y, blockers))
+                target = y - offset
             out.append(slide_for(rod, target) / rod.slide_limit)
             if self.joints == "both":
                 state = None if own is None else (float(obs[own[0]]), float(obs[own[1]]))
-                out.append(self.spin_for(rod, x, y, vx, vy, state) / T.SPIN_LIMIT)
+                out.append(self.spin_for(rod, x, y, vx, vy, state, offset) / T.SPIN_LIMIT)
         return np.array(out, dtype=np.float32)
+
+    def _in_reach(self, rod: T.Rod, x: float, vx: float, vy: float) -> bool:
+        return -_REACH_NEAR < x - rod.x < _REACH_FAR and vx * vx + vy * vy < _SLOW**2
 
     @staticmethod
     def target_y(rod: T.Rod, x: float, y: float, vx: float, vy: float) -> float:
@@ -121,14 +153,24 @@ class ScriptedTeam:
         vx: float,
         vy: float,
         state: tuple[float, float] | None,
+        offset: float = 0.0,
     ) -> float:
         ahead = x - rod.x
-        slow = vx * vx + vy * vy < 1.5**2
+        slow = vx * vx + vy * vy < _SLOW**2
+        if self.volley and state is not None and vx < -VOLLEY_MIN_SPEED and ahead > 0:
+            # Strike a fast ball coming at the rod: blocking it only lets it trickle away.
+            arrival = (ahead - _REACH_NEAR) / -vx
+            if arrival <= VOLLEY_LEAD:
+                return KICK_ANGLE
+            if arrival <= VOLLEY_WINDOW:
+                return WIND_UP_ANGLE
         if self.kick and -_REACH_NEAR < ahead < _REACH_FAR and slow:
             if state is None:
                 return KICK_ANGLE if ahead > _REACH_NEAR else 0.0
             slide, spin = state
-            aligned = abs(slide - slide_for(rod, y)) < 0.006
+            # A corner kick's angle changes by about 5 degrees per millimetre of offset.
+            tolerance = 0.006 if offset == 0.0 else 0.001
+            aligned = abs(slide - slide_for(rod, y - offset)) < tolerance
             if aligned and spin < -1.0:
                 return KICK_ANGLE  # wound up behind the rod and lined up: swing through
             if aligned and abs(spin) < 0.3 and ahead > _REACH_NEAR:

@@ -1,0 +1,110 @@
+"""Aimed shots: which way to send the ball past the other team's figurines, and how.
+
+A figurine's foot is a box. Struck with its flat face, the ball leaves straight along +x; struck
+with a corner, it leaves along the line from the corner through its centre. So the sideways
+offset between ball and figurine at the moment of the kick sets the shot's angle. The table
+below was measured in the simulator by kicking a resting ball from the wind-up with the keeper
+at each offset; past 0.030 m the corner misses the ball.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from foosball_gym import table as T
+
+# Ball-minus-figurine y offset (m) -> shot angle from +x (degrees).
+_OFFSETS = np.array([0.0150, 0.0175, 0.0200, 0.0225, 0.0250, 0.0275, 0.0300])
+_ANGLES = np.array([0.0, 8.2, 21.5, 32.9, 41.9, 48.9, 54.3])
+MAX_ANGLE = math.radians(float(_ANGLES[-1]))
+MIN_ANGLE = math.radians(10.0)
+# How far off a kick at a given angle comes out (measured spread), and the clearance beyond
+# which a wider lane is no better.
+ANGLE_ERROR = math.radians(1.0)
+ANGLE_ERROR_SLOPE = 0.1
+CLEAR_ENOUGH = 0.02
+
+_WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
+# A ball whose centre crosses the line within the opening is a goal; one that grazes a post
+# mostly goes in, so the lane only has to keep the centre a little inside.
+_GOAL = T.GOAL_HALF_WIDTH - 0.005
+# Half the width a figurine blocks: its own half width plus the ball's radius.
+_BLOCK = T.FIGURINE_SIZE[1] / 2 + T.BALL_RADIUS
+# A fast bank shot keeps only about a quarter of its sideways speed in the simulator, but
+# planning with that chose steeper, less accurate kicks and scored less (40 % against 45 %
+# over 300 obstacle layouts) than planning with the nominal half.
+_WALL_RESTITUTION = T.SURFACE_RESTITUTION
+
+
+def offset_for_angle(angle: float) -> float:
+    """The ball-minus-figurine y offset whose kick sends the ball at ``angle`` (rad)."""
+    degrees = min(abs(math.degrees(angle)), float(_ANGLES[-1]))
+    offset = float(np.interp(degrees, _ANGLES, _OFFSETS))
+    if degrees < 1e-6:
+        return 0.0
+    return math.copysign(offset, angle)
+
+
+def path_y(x0: float, y0: float, angle: float, xs: Sequence[float]) -> list[float]:
+    """Where a ball leaving (x0, y0) at ``angle`` crosses each x in ``xs`` (increasing, all
+    beyond x0), bouncing off the side walls, which halve its sideways speed."""
+    slope = math.tan(angle)
+    x, y, out = x0, y0, []
+    for target in xs:
+        while True:
+            reach = y + slope * (target - x)
+            if abs(reach) <= _WALL or slope == 0:
+                out.append(reach)
+                x, y = target, reach
+                break
+            wall = math.copysign(_WALL, slope)
+            x += (wall - y) / slope
+            y = wall
+            slope = -slope * _WALL_RESTITUTION
+    return out
+
+
+def clearance(
+    x0: float, y0: float, angle: float, blockers: Sequence[tuple[float, Sequence[float]]]
+) -> float:
+    """The smallest margin (m) by which a shot at ``angle`` passes every blocking figurine
+    and stays inside the goal mouth; negative when it is blocked or misses."""
+    ahead = sorted((bx, fys) for bx, fys in blockers if bx > x0)
+    xs = [bx for bx, _ in ahead] + [T.GOAL_LINE_X]
+    ys = path_y(x0, y0, angle, xs)
+
+    margin = _GOAL - abs(ys[-1])
+    for (_, fys), y in zip(ahead, ys):
+        for fy in fys:
+            margin = min(margin, abs(y - fy) - _BLOCK)
+    return margin
+
+
+def plan_shot(
+    x0: float,
+    y0: float,
+    blockers: Sequence[tuple[float, Sequence[float]]],
+    steps: int = 55,
+) -> float:
+    """The shot angle (rad) whose worst clearance over its likely error is widest.
+
+    Corner kicks come out up to about 10 degrees off at 40 degrees, so an angle is judged by
+    the worst of itself and its neighbours within that error; straighter shots win ties.
+    A straight shot with an open lane is taken as it is: it is the fastest and surest.
+    """
+    if clearance(x0, y0, 0.0, blockers) > 0.0:
+        return 0.0
+    best, best_score = 0.0, -math.inf
+    for angle in np.linspace(-MAX_ANGLE, MAX_ANGLE, 2 * steps + 1):
+        angle = float(angle)
+        if 0.0 < abs(angle) < MIN_ANGLE:
+            continue  # the flat face ends abruptly at the corner: these come out straight
+        error = ANGLE_ERROR + ANGLE_ERROR_SLOPE * abs(angle)
+        score = min(clearance(x0, y0, angle + d, blockers) for d in (-error, 0.0, error))
+        score = min(score, CLEAR_ENOUGH) - 0.01 * abs(angle)
+        if score > best_score:
+            best, best_score = float(angle), score
+    return best

@@ -1,0 +1,114 @@
+"""Aimed and volleyed shots of the scripted keeper: the geometry, and that they score."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from foosball_gym import table as T
+from foosball_gym.policies.aiming import (
+    MAX_ANGLE,
+    clearance,
+    offset_for_angle,
+    path_y,
+    plan_shot,
+)
+from foosball_gym.policies.scripted import KICK_ANGLE, WIND_UP_ANGLE, ScriptedTeam, slide_for
+
+WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
+KEEPER = T.rod("home_keeper")
+AWAY_KEEPER = T.rod("away_keeper")
+
+
+def test_a_straight_path_keeps_its_y():
+    assert path_y(-0.5, 0.05, 0.0, [0.0, 0.6]) == [0.05, 0.05]
+
+
+def test_a_wall_bounce_reflects_and_halves_the_sideways_speed():
+    angle = math.atan(0.5)  # reaches the wall 2 * (WALL - 0) further along x
+    wall_x = -0.5 + WALL / 0.5
+    after = 0.2
+    (y,) = path_y(-0.5, 0.0, angle, [wall_x + after])
+    assert y == pytest.approx(WALL - 0.25 * after)
+
+
+def test_a_figurine_in_the_lane_blocks_a_straight_shot_and_a_free_lane_does_not():
+    blocked = [(AWAY_KEEPER.x, AWAY_KEEPER.figurine_y(0.0))]
+    free = [(AWAY_KEEPER.x, AWAY_KEEPER.figurine_y(0.1))]
+    assert clearance(-0.5, 0.0, 0.0, blocked) < 0
+    assert clearance(-0.5, 0.0, 0.0, free) > 0
+    assert clearance(-0.5, 0.2, 0.0, free) < 0  # clear of figurines but beside the goal
+
+
+def test_the_plan_is_straight_when_the_lane_is_open_and_angled_around_a_blocker():
+    free = [(AWAY_KEEPER.x, AWAY_KEEPER.figurine_y(0.1))]
+    assert plan_shot(-0.5, 0.0, free) == 0.0
+    blocked = [(AWAY_KEEPER.x, AWAY_KEEPER.figurine_y(0.0))]
+    angle = plan_shot(-0.5, 0.0, blocked)
+    assert angle != 0.0 and abs(angle) <= MAX_ANGLE
+    assert clearance(-0.5, 0.0, angle, blocked) > 0
+
+
+def test_the_offset_grows_with_the_angle_and_keeps_its_sign():
+    offsets = [offset_for_angle(math.radians(a)) for a in (10, 20, 30, 40, 50)]
+    assert offsets == sorted(offsets) and offsets[0] > T.FIGURINE_SIZE[1] / 2 - 0.003
+    assert offset_for_angle(math.radians(-30)) == -offset_for_angle(math.radians(30))
+    assert offset_for_angle(0.0) == 0.0
+
+
+@pytest.mark.parametrize("degrees", [-40, -20, 20, 40])
+def test_a_corner_kick_leaves_at_the_planned_angle(degrees):
+    env = gym.make("Foosball-Score-v0")
+    env.reset(seed=0, options={"ball_position": (-0.497, 0.0)})
+    slide = slide_for(KEEPER, -offset_for_angle(math.radians(degrees))) / KEEPER.slide_limit
+    try:
+        for spin, steps in ((WIND_UP_ANGLE, 25), (KICK_ANGLE, 6)):
+            for _ in range(steps):
+                obs, *_ = env.step(np.array([slide, spin / T.SPIN_LIMIT], np.float32))
+    finally:
+        env.close()
+    vx, vy = float(obs[6]), float(obs[7])
+    assert vx > 2.0
+    assert math.degrees(math.atan2(vy, vx)) == pytest.approx(degrees, abs=8)
+
+
+def play(env, policy, options=None, seed=0) -> dict:
+    obs, info = env.reset(seed=seed, options=options)
+    done = False
+    while not done:
+        obs, _, terminated, truncated, info = env.step(policy(obs))
+        done = terminated or truncated
+    return info
+
+
+def test_aiming_scores_more_often_past_the_obstacles_than_shooting_straight():
+    env = gym.make("Foosball-Score-v0", obstacles=True)
+    names = env.unwrapped.obs_builder.names
+    straight = ScriptedTeam(names, ("home_keeper",), "both")
+    aimed = ScriptedTeam(names, ("home_keeper",), "both", aim=True)
+    try:
+        scored = {
+            name: sum(play(env, policy, seed=s)["is_success"] for s in range(80))
+            for name, policy in (("straight", straight), ("aimed", aimed))
+        }
+    finally:
+        env.close()
+    assert scored["aimed"] >= scored["straight"] + 3, scored
+
+
+def test_volleys_score_more_incoming_balls_than_blocking_them():
+    env = gym.make("Foosball-Score-v0", ball_start="incoming")
+    names = env.unwrapped.obs_builder.names
+    blocker = ScriptedTeam(names, ("home_keeper",), "both")
+    volley = ScriptedTeam(names, ("home_keeper",), "both", volley=True)
+    try:
+        scored = {
+            name: sum(play(env, policy, seed=s)["is_success"] for s in range(80))
+            for name, policy in (("block", blocker), ("volley", volley))
+        }
+    finally:
+        env.close()
+    assert scored["volley"] >= scored["block"] + 8, scored
