@@ -27,7 +27,7 @@ WIND_UP_ANGLE = -math.pi / 2  # feet raised behind the rod, clear of the ball
 # volley starts when the ball is this many seconds from the feet.
 VOLLEY_LEAD = 0.035
 VOLLEY_WINDOW = 0.25
-VOLLEY_MIN_SPEED = 2.0  # slower balls are stopped first, then kicked
+VOLLEY_MIN_SPEED = 1.0  # slower balls are stopped first, then kicked
 
 
 def fold_into_walls(y: float, half_width: float = _WALL) -> float:
