@@ -21,6 +21,7 @@ _WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
 _REACH_NEAR = T.FIGURINE_SIZE[0] / 2 + T.BALL_RADIUS - 0.004
 _REACH_FAR = 0.075
 _SLOW = 1.5  # m/s: a ball slower than this in reach gets kicked
+_AIM_SPEED = 0.3  # m/s: a ball slower than this in reach gets an aimed kick
 KICK_ANGLE = math.pi / 2  # spin target of a kick: the feet swing through and end up in front
 WIND_UP_ANGLE = -math.pi / 2  # feet raised behind the rod, clear of the ball
 # A swing from the wind-up takes about 32 ms to bring the feet down (torque-limited), so a
@@ -134,7 +135,9 @@ class ScriptedTeam:
         return np.array(out, dtype=np.float32)
 
     def _in_reach(self, rod: T.Rod, x: float, vx: float, vy: float) -> bool:
-        return -_REACH_NEAR < x - rod.x < _REACH_FAR and vx * vx + vy * vy < _SLOW**2
+        # Only a ball lying still in front is worth the time a precise line-up takes: one
+        # rolling at the rod gets past while the foot moves aside for a corner kick.
+        return 0.0 < x - rod.x < _REACH_FAR and vx * vx + vy * vy < _AIM_SPEED**2
 
     @staticmethod
     def target_y(rod: T.Rod, x: float, y: float, vx: float, vy: float) -> float:
