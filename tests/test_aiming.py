@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from foosball_gym import table as T
+from foosball_gym.envs.interface import task_interface
 from foosball_gym.policies.aiming import (
     MAX_ANGLE,
     clearance,
@@ -17,6 +18,7 @@ from foosball_gym.policies.aiming import (
     plan_shot,
 )
 from foosball_gym.policies.scripted import KICK_ANGLE, WIND_UP_ANGLE, ScriptedTeam, slide_for
+from foosball_gym.training.evaluation import evaluate
 
 WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
 KEEPER = T.rod("home_keeper")
@@ -75,40 +77,25 @@ def test_a_corner_kick_leaves_at_the_planned_angle(degrees):
     assert math.degrees(math.atan2(vy, vx)) == pytest.approx(degrees, abs=8)
 
 
-def play(env, policy, options=None, seed=0) -> dict:
-    obs, info = env.reset(seed=seed, options=options)
-    done = False
-    while not done:
-        obs, _, terminated, truncated, info = env.step(policy(obs))
-        done = terminated or truncated
-    return info
+def scored(env_kwargs: dict, **variants: dict) -> dict[str, int]:
+    """Goals of the scripted keeper with each set of options, over the same 80 seeds."""
+    names = task_interface("Foosball-Score-v0", env_kwargs).builder.names
+    return {
+        name: evaluate(
+            ScriptedTeam(names, ("home_keeper",), "both", **options),
+            "Foosball-Score-v0",
+            env_kwargs,
+            episodes=80,
+        ).successes
+        for name, options in variants.items()
+    }
 
 
 def test_aiming_scores_more_often_past_the_obstacles_than_shooting_straight():
-    env = gym.make("Foosball-Score-v0", obstacles=True)
-    names = env.unwrapped.obs_builder.names
-    straight = ScriptedTeam(names, ("home_keeper",), "both")
-    aimed = ScriptedTeam(names, ("home_keeper",), "both", aim=True)
-    try:
-        scored = {
-            name: sum(play(env, policy, seed=s)["is_success"] for s in range(80))
-            for name, policy in (("straight", straight), ("aimed", aimed))
-        }
-    finally:
-        env.close()
-    assert scored["aimed"] >= scored["straight"] + 3, scored
+    goals = scored({"obstacles": True}, straight={}, aimed={"aim": True})
+    assert goals["aimed"] >= goals["straight"] + 3, goals
 
 
 def test_volleys_score_more_incoming_balls_than_blocking_them():
-    env = gym.make("Foosball-Score-v0", ball_start="incoming")
-    names = env.unwrapped.obs_builder.names
-    blocker = ScriptedTeam(names, ("home_keeper",), "both")
-    volley = ScriptedTeam(names, ("home_keeper",), "both", volley=True)
-    try:
-        scored = {
-            name: sum(play(env, policy, seed=s)["is_success"] for s in range(80))
-            for name, policy in (("block", blocker), ("volley", volley))
-        }
-    finally:
-        env.close()
-    assert scored["volley"] >= scored["block"] + 8, scored
+    goals = scored({"ball_start": "incoming"}, block={}, volley={"volley": True})
+    assert goals["volley"] >= goals["block"] + 8, goals

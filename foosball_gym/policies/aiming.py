@@ -21,8 +21,8 @@ _OFFSETS = np.array([0.0150, 0.0175, 0.0200, 0.0225, 0.0250, 0.0275, 0.0300])
 _ANGLES = np.array([0.0, 8.2, 21.5, 32.9, 41.9, 48.9, 54.3])
 MAX_ANGLE = math.radians(float(_ANGLES[-1]))
 MIN_ANGLE = math.radians(10.0)
-# How far off a kick at a given angle comes out (measured spread), and the clearance beyond
-# which a wider lane is no better.
+# The error a kick at a given angle is allowed when its lane is judged (chosen by scoring over
+# obstacle layouts), and the clearance beyond which a wider lane is no better.
 ANGLE_ERROR = math.radians(1.0)
 ANGLE_ERROR_SLOPE = 0.1
 CLEAR_ENOUGH = 0.02
@@ -91,8 +91,9 @@ def plan_shot(
 ) -> float:
     """The shot angle (rad) whose worst clearance over its likely error is widest.
 
-    Corner kicks come out up to about 10 degrees off at 40 degrees, so an angle is judged by
-    the worst of itself and its neighbours within that error; straighter shots win ties.
+    Corner kicks come out several degrees off, more at wider angles, so an angle is judged by
+    the worst of itself and its neighbours within an allowed error that grows with the angle;
+    straighter shots win ties.
     A straight shot with an open lane is taken as it is: it is the fastest and surest.
     """
     if clearance(x0, y0, 0.0, blockers) > 0.0:

@@ -108,15 +108,15 @@ class ScriptedTeam:
             ok = slide in names and spin in names
             self._own.append((names.index(slide), names.index(spin)) if ok else None)
         self.n_actions = len(self.rods) * (2 if joints == "both" else 1)
+        self.aim = aim and self.kick
         # The other team's rods the observation places, as the home side sees them.
         other = T.HOME if str(rods[0]).startswith(T.AWAY) else T.AWAY
         self._blockers = []
-        if aim and self.kick:
+        if self.aim:
             for role in T.ROLES:
                 name = f"{other}_{role}_slide_pos"
                 if name in names:
                     self._blockers.append((T.rod(f"{T.AWAY}_{role}"), names.index(name)))
-        self.aim = bool(aim and self.kick)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         x, y, vx, vy = (float(obs[i]) for i in self._ball)
