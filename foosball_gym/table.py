@@ -42,12 +42,31 @@ ROD_MASS = 0.45
 CARRIAGE_MASS = 0.25  # what moves along the rail besides the rod: carriage, revolute motor
 
 # Figurines hang from the rod: foot 0.011 m above the surface, head 0.040 m above the axis.
-FIGURINE_SIZE = (0.030, 0.034, 0.112)  # x, y, z
+FIGURINE_SIZE = (0.030, 0.034, 0.112)  # x, y, z: the overall box, what the camera sees
 FIGURINE_FOOT_HEIGHT = 0.011
 FIGURINE_HEAD_ABOVE_AXIS = 0.040
 FIGURINE_CENTRE_BELOW_AXIS = FIGURINE_SIZE[2] / 2 - FIGURINE_HEAD_ABOVE_AXIS
 FIGURINE_FOOT_BELOW_AXIS = ROD_HEIGHT - FIGURINE_FOOT_HEIGHT
 FIGURINE_MASS = 0.025
+# Where it meets the ball the authors' CAD figurine is a slim leg, not the overall box. Its
+# cross-sections, as (height above the surface, x from, x to) in metres, from the sole up; the
+# leg is FIGURINE_LEG_HALF_WIDTH wide either side along y, at full thickness out to
+# FIGURINE_LEG_FLAT_HALF_WIDTH, its ends narrowing to a point. Above FIGURINE_LEG_TOP the
+# figurine is the full box (a ball on the table reaches only 0.0345 m high).
+FIGURINE_LEG_SECTIONS = (
+    (0.011, -0.0020, 0.0024),
+    (0.012, -0.0025, 0.0029),
+    (0.017, -0.0045, 0.0048),
+    (0.040, -0.0045, 0.0048),
+)
+FIGURINE_LEG_FLAT_HALF_WIDTH = 0.009
+FIGURINE_LEG_HALF_WIDTH = 0.012
+FIGURINE_LEG_TOP = FIGURINE_LEG_SECTIONS[-1][0]
+# The farthest any point of a figurine gets from its rod's axis (the sole's edge): a spinning
+# rod reaches no further.
+FIGURINE_REACH = math.hypot(
+    FIGURINE_FOOT_BELOW_AXIS, max(-FIGURINE_LEG_SECTIONS[0][1], FIGURINE_LEG_SECTIONS[0][2])
+)
 
 # Drives (per rod).
 SLIDE_MAX_FORCE = 70.0  # N
@@ -60,27 +79,68 @@ SPIN_LIMIT = 2 * math.pi  # rad, two revolutions in total by the rules
 BALL_RADIUS = 0.01725
 BALL_MASS = 0.022
 BALL_RESTITUTION = 0.5
-# Bullet has one Coulomb coefficient per body; the sliding (dynamic) value is the one that
-# matters for a ball that mostly rolls and slides, so the static one is kept only for reference.
-BALL_FRICTION_STATIC = 0.2
-BALL_FRICTION = 0.1
 BALL_LINEAR_DAMPING = 0.01
 BALL_MAX_SPEED = 15.0
+# Rolling resistance as a deceleration in units of g: a rolling ball slows by this times
+# 9.81 m/s^2 (besides its linear damping). 0.01 stops a 1 m/s ball within about 5 m on a flat
+# table; a worn ball or a dusty table rolls less far.
+ROLLING_RESISTANCE = 0.01
 
-SURFACE_FRICTION_STATIC = 0.7
-SURFACE_FRICTION = 0.5
-SURFACE_RESTITUTION = 0.5  # the walls and the goal pockets are of the same material
-FIGURINE_FRICTION = 0.2
-FIGURINE_RESTITUTION = 0.5
+
+@dataclass(frozen=True)
+class Material:
+    """A contact material as the authors' model binds it: Coulomb friction and restitution."""
+
+    static_friction: float
+    dynamic_friction: float
+    restitution: float
+
+
+# The materials bound to the colliders in the authors' model (SPEC §1). Their engine combines
+# two materials by averaging each coefficient; see :func:`combine`.
+BALL_MATERIAL = Material(0.2, 0.1, 0.5)
+TABLE_MATERIAL = Material(0.2, 0.1, 0.5)  # surface, walls, goal pockets
+FIGURINE_MATERIAL = Material(0.2, 0.2, 0.5)
+
+
+def combine(a: float, b: float) -> float:
+    """How the authors' engine combines one coefficient of two materials in contact."""
+    return (a + b) / 2
+
+
+# The coefficients of each contact the ball makes. Bullet keeps one friction coefficient per
+# body for sticking and sliding alike; a ball slides where friction matters (kicks, bounces),
+# so the dynamic value is the one simulated.
+BALL_TABLE_FRICTION = combine(BALL_MATERIAL.dynamic_friction, TABLE_MATERIAL.dynamic_friction)
+BALL_TABLE_RESTITUTION = combine(BALL_MATERIAL.restitution, TABLE_MATERIAL.restitution)
+# The authors' materials give the ball 0.15 on a figurine, but here a figurine is held only by
+# its drive's 1.41 N m and recoils from a fast ball: its face then slides up the ball, and 0.15
+# of friction throws the ball upwards (4 of 60 scripted incoming-ball games and 3 of 3 shots
+# at 10-15 m/s at a standing keeper left the table). 0.05 keeps every ball on the table (hops
+# of at most 26 mm in those games, 32 mm from a 15 m/s shot) and changes no scripted rate by
+# more than its noise; 0.02 (Bullet's product of the spec's values) lifts it 14 mm at most.
+AUTHORS_BALL_FIGURINE_FRICTION = combine(
+    BALL_MATERIAL.dynamic_friction, FIGURINE_MATERIAL.dynamic_friction
+)
+BALL_FIGURINE_FRICTION = 0.05
+BALL_FIGURINE_RESTITUTION = combine(BALL_MATERIAL.restitution, FIGURINE_MATERIAL.restitution)
 
 # What a simulation step reports about goals (seen from the home side).
 NO_GOAL = 0
 HOME_SCORED = 1  # the ball crossed the away goal line (x > 0)
 AWAY_SCORED = -1
 
-# Timing.
+# Timing. PHYSICS_HZ is the rate of the drives and of a ball in free flight; near a contact the
+# simulator takes finer steps, so that nothing moves more than CONTACT_TRAVEL relative to
+# what it may touch within one physics step.
 PHYSICS_HZ = 240
 CONTROL_HZ = 60
+CONTACT_TRAVEL = 0.01
+
+# Raised whenever a change to the simulated physics (contacts, shapes, materials, stepping) can
+# change what a policy meets; runs record it, and loading a model trained on another revision
+# warns.
+PHYSICS_REVISION = 2
 
 
 @dataclass(frozen=True)
