@@ -32,7 +32,7 @@ def measure(env_id: str, steps: int, seed: int = 0, **kwargs) -> tuple[float, fl
             env.reset()
             resets += 1
     elapsed = time.perf_counter() - start
-    substeps = env.unwrapped.sim.substeps
+    substeps = env.unwrapped.sim.physics_steps / max(1, steps + resets)
     env.close()
     rate = steps / elapsed
     return rate, rate * substeps, resets

@@ -2,8 +2,21 @@
 
 A :class:`TableSim` owns one ``BulletClient`` (so many tables live in one process), loads the
 table URDF with the rods that are in play and the ball, and advances the world in control
-steps of several physics substeps. Goals and a ball leaving the table are checked after every
-substep, so a fast ball cannot cross the goal line and bounce back out unseen.
+steps. Goals and a ball leaving the table are checked after every physics step, so a fast ball
+cannot cross the goal line and bounce back out unseen.
+
+How contacts stay right at every speed (measured; see ``benchmarks/physics_report.py``):
+
+- Bullet's continuous collision detection would stop tunnelling, but its predictive contacts
+  carry no restitution, so a fast ball died against a wall. The ball has none here. Instead,
+  whenever the ball or a figurine could reach the other, or the ball a wall, within the next
+  physics step, that step is split into finer ones, so that nothing moves more than
+  ``contact_travel`` relative to what it may touch. Far from everything the table runs at
+  ``physics_hz``.
+- Bullet pushes penetrating bodies apart with a velocity (ERP) that adds to a bounce; with
+  multibody contacts it cannot be split off, so its gain is kept near zero.
+- A position gain in Bullet acts per physics step; the drives' gains here are per second and
+  rescaled to whatever step is taken, so a drive behaves the same at every step size.
 
 Rods that are not in play are left out of the loaded model: they cannot touch the ball and cost
 nothing to simulate.
@@ -30,6 +43,7 @@ import numpy as np
 
 from foosball_gym import table as T
 from foosball_gym.camera import CameraModel
+from foosball_gym.physics_options import check_physics
 
 
 def _libc_fflush() -> None:
@@ -96,6 +110,9 @@ def _urdf_with_rods(rod_names: tuple[str, ...]) -> str:
             owner = rod_of(el.get("name", ""))
             if owner is not None and owner not in keep:
                 robot.remove(el)
+    # The copy lives elsewhere, so the meshes it names are given by their full path.
+    for mesh in robot.iter("mesh"):
+        mesh.set("filename", str(urdf_path(mesh.get("filename", ""))))
     text = ET.tostring(robot, encoding="unicode")
     # Named by content, so processes share one file and a changed table gets a new one.
     digest = hashlib.sha1(text.encode()).hexdigest()[:16]
@@ -114,17 +131,73 @@ class BallState:
     velocity: np.ndarray  # (3,) m/s
 
 
+def _rod_spin_inertia(rod: T.Rod) -> float:
+    """The rod's moment of inertia about its axis, figurines included (kg m^2)."""
+    fx, _, fz = T.FIGURINE_SIZE
+    figurine = T.FIGURINE_MASS * (T.FIGURINE_CENTRE_BELOW_AXIS**2 + (fx * fx + fz * fz) / 12)
+    return T.ROD_MASS * T.ROD_RADIUS**2 / 2 + len(rod.figurine_offsets) * figurine
+
+
+# Where a figurine can be, in the plane across its rod (distances from the rod's axis): the
+# body, a box round the axis, reaches _BODY_REACH; the leg spans _LEG_INNER.._LEG_OUTER (the
+# reach of the sole) within _LEG_HALF_ANGLE either side of the line the spin angle points along.
+_BODY_REACH = math.hypot(T.ROD_HEIGHT - T.FIGURINE_LEG_TOP, T.FIGURINE_SIZE[0] / 2)
+_LEG_INNER = T.ROD_HEIGHT - T.FIGURINE_LEG_TOP
+_LEG_OUTER = T.FIGURINE_REACH
+_LEG_HALF_ANGLE = math.atan2(max(max(-x0, x1) for _, x0, x1 in T.FIGURINE_LEG_SECTIONS), _LEG_INNER)
+_FIGURINE_HALF_WIDTH = T.FIGURINE_SIZE[1] / 2
+# What a check of "could these touch within the step" adds to the distances, for the rounding
+# of everything it leaves out (the ball's spin, contact slop).
+_NEAR_MARGIN = 0.002
+# How fast (1/s) Bullet pushes penetrating bodies apart. The velocity it adds also adds to a
+# bounce, and for contacts with a multibody (the table, a figurine) it cannot be split off:
+# Bullet's 0.2 per step made a wall rebound keep 0.51-0.70 of the normal speed instead of 0.5;
+# 0.01 per 240 Hz step keeps 0.48-0.51, and a ball at rest still sits on the surface to 0.01 mm.
+# Per second, so that finer steps do not push harder.
+_ERP_RATE = 0.01 * T.PHYSICS_HZ
+# A ball falling faster than this (m/s) can bounce on the surface; slower, it rolls or rests.
+_FALLING = 0.3
+
+
+def _angle_between(a: float, b: float) -> float:
+    """|a - b| wrapped into [0, pi]."""
+    d = (a - b) % (2 * math.pi)
+    return 2 * math.pi - d if d > math.pi else d
+
+
+def _distance_to_leg_sweep(rho: float, phi: float, spin: float, sweep: float) -> float:
+    """Distance from a point (polar: ``rho`` from the axis, at angle ``phi``) to everywhere a
+    figurine's leg goes while its spin angle moves within ``spin`` +- ``sweep``."""
+    half = sweep + _LEG_HALF_ANGLE
+    off = _angle_between(phi, spin)
+    if off <= half or half >= math.pi:
+        return max(0.0, rho - _LEG_OUTER, _LEG_INNER - rho)
+    # Outside the swept sector: the nearest point is on one of its two edges.
+    a = off - half
+    along, across = rho * math.cos(a), rho * math.sin(a)
+    if along < _LEG_INNER:
+        return math.hypot(_LEG_INNER - along, across)
+    if along > _LEG_OUTER:
+        return math.hypot(along - _LEG_OUTER, across)
+    return rho * math.sin(a)
+
+
 class TableSim:
     """A foosball table in PyBullet.
 
     Args:
         rods: names of the rods in play (see ``foosball_gym.table.RODS``), in the order every
             joint array of this class uses.
-        physics_hz: physics step rate.
-        substeps: physics steps per control step.
+        physics_hz: physics step rate away from contacts (240); a whole multiple of
+            ``control_hz``.
+        control_hz: control steps per second (60): one :meth:`step` is ``1 / control_hz``.
+        contact_travel: near a possible contact, physics steps are made fine enough that the
+            ball moves at most this far (m) relative to what it may touch within one.
+        rolling_resistance: how a rolling ball slows, as a deceleration in units of g.
         gui: open the PyBullet GUI instead of running headless.
-        slide_gain, spin_gain: position gains of the simulated drives (Bullet's motor ``kp``).
-            The defaults reach a 0.1 m slide target in about 90 ms without overshoot.
+        slide_gain, spin_gain: position gains of the simulated drives (1/s: the speed a drive
+            asks for per unit of position error). The defaults reach a 0.1 m slide target in
+            about 90 ms without overshoot.
     """
 
     def __init__(
@@ -132,15 +205,16 @@ class TableSim:
         rods: Sequence[str],
         *,
         physics_hz: int = T.PHYSICS_HZ,
-        substeps: int = T.PHYSICS_HZ // T.CONTROL_HZ,
+        control_hz: int = T.CONTROL_HZ,
+        contact_travel: float = T.CONTACT_TRAVEL,
+        rolling_resistance: float = T.ROLLING_RESISTANCE,
         gui: bool = False,
-        slide_gain: float = 0.2,
-        spin_gain: float = 0.3,
+        slide_gain: float = 48.0,
+        spin_gain: float = 72.0,
     ) -> None:
-        if physics_hz <= 0 or substeps <= 0:
-            raise ValueError(
-                f"physics_hz and substeps must be positive, got {physics_hz}, {substeps}"
-            )
+        physics_hz, control_hz, contact_travel, rolling_resistance = check_physics(
+            physics_hz, control_hz, contact_travel, rolling_resistance
+        )
         names = tuple(rods)
         for name in names:
             T.rod(name)
@@ -148,8 +222,10 @@ class TableSim:
             raise ValueError(f"each rod may be in play once, got {names}")
         self.rods: tuple[T.Rod, ...] = tuple(T.rod(n) for n in names)
         self.physics_hz = physics_hz
-        self.substeps = substeps
-        self.control_dt = substeps / physics_hz
+        self.control_hz = control_hz
+        self.substeps = physics_hz // control_hz
+        self.control_dt = 1.0 / control_hz
+        self.contact_travel = contact_travel
         self.gui = gui
         self._closed = True
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
@@ -163,7 +239,7 @@ class TableSim:
         self._closed = False
         self._p = self._client
         # BulletClient builds a new partial on every attribute access; the calls made every
-        # substep are bound once here instead.
+        # physics step are bound once here instead.
         cid = self._client._client
         self._step_sim = functools.partial(pybullet.stepSimulation, physicsClientId=cid)
         self._base_pose = functools.partial(
@@ -174,14 +250,17 @@ class TableSim:
         self._motor_array = functools.partial(
             pybullet.setJointMotorControlArray, physicsClientId=cid
         )
+        self._set_engine = functools.partial(
+            pybullet.setPhysicsEngineParameter, physicsClientId=cid
+        )
         self._p.setGravity(0, 0, -9.81)
-        # allowedCcdPenetration=0: Bullet's default lets a continuous-collision hit sink 4 cm
-        # into a wall before it counts; with 0 a ball never sinks more than 2 mm.
+        self._dt = 1.0 / physics_hz
         self._p.setPhysicsEngineParameter(
-            fixedTimeStep=1.0 / physics_hz,
+            fixedTimeStep=self._dt,
             numSubSteps=0,
             deterministicOverlappingPairs=1,
-            allowedCcdPenetration=0.0,
+            erp=_ERP_RATE * self._dt,
+            contactERP=_ERP_RATE * self._dt,
         )
         if gui:
             self._p.configureDebugVisualizer(pybullet.COV_ENABLE_GUI, 0)
@@ -202,43 +281,54 @@ class TableSim:
         self._max_speed = [T.SLIDE_MAX_SPEED] * self._n + [T.SPIN_MAX_SPEED] * self._n
         self._lower = [-r.slide_limit for r in self.rods] + [-T.SPIN_LIMIT] * self._n
         self._upper = [-v for v in self._lower]
+        moving = T.CARRIAGE_MASS + T.ROD_MASS
+        # The most a drive can change its joint's speed per second: what bounds where a rod can
+        # be by the end of a physics step.
+        self._accel = [
+            T.SLIDE_MAX_FORCE / (moving + len(r.figurine_offsets) * T.FIGURINE_MASS)
+            for r in self.rods
+        ] + [T.SPIN_MAX_TORQUE / _rod_spin_inertia(r) for r in self.rods]
         self.set_drive_gains(slide_gain, spin_gain)
 
-        self._p.changeDynamics(
-            self.body, -1, lateralFriction=T.SURFACE_FRICTION, restitution=T.SURFACE_RESTITUTION
-        )
-        # Bullet caps every joint speed of a multibody at 100 by default; the spin drive is faster.
+        # Bullet keeps one friction and one restitution per body and multiplies two bodies'
+        # values; the authors' engine averages them. The ball is the only body that touches
+        # anything, so it carries 1 and each body it can touch carries the value of its
+        # contact with the ball (table.py: BALL_TABLE_*, BALL_FIGURINE_*): see
+        # _apply_ball_dynamics.
         self._p.changeDynamics(self.body, -1, maxJointVelocity=T.SPIN_MAX_SPEED * 1.1)
-        for idx in self._spin_idx:
-            self._p.changeDynamics(
-                self.body,
-                idx,
-                lateralFriction=T.FIGURINE_FRICTION,
-                restitution=T.FIGURINE_RESTITUTION,
-            )
         for idx in self._joint_idx:
             self._p.changeDynamics(
                 self.body, idx, linearDamping=0.0, angularDamping=0.0, jointDamping=0.0
             )
         self._mode = "position"
+        self._targets = [0.0] * (2 * self._n)
+        self._velocity_targets = [0.0] * (2 * self._n)
+        self._sent_dt = 0.0
+        self._steps = self.substeps
+        # What the last reads of the ball and the joints gave, until the world moves.
+        self._ball_cache: tuple[float, float, float, float, float, float] | None = None
+        self._joint_cache: tuple[tuple[float, ...], tuple[float, ...]] | None = None
         self._init_motors()
 
         self.ball_mass = T.BALL_MASS
-        self.ball_friction = T.BALL_FRICTION
-        self.ball_restitution = T.BALL_RESTITUTION
+        self.ball_friction = T.BALL_MATERIAL.dynamic_friction
+        self.ball_restitution = T.BALL_TABLE_RESTITUTION
         self.ball_damping = T.BALL_LINEAR_DAMPING
+        self.rolling_resistance = rolling_resistance
         self._spawn_ball()
         self._camera: CameraModel | None = None
         self._view = self._proj = None
+        self.physics_steps = 0
 
     # ----------------------------------------------------------------------------- set-up
 
     def set_drive_gains(self, slide_gain: float, spin_gain: float) -> None:
-        """Position gains of the simulated drives (used in position mode)."""
-        if slide_gain <= 0 or spin_gain <= 0:
+        """Position gains of the simulated drives in 1/s (used in position mode)."""
+        if not (slide_gain > 0 and spin_gain > 0) or not math.isfinite(slide_gain + spin_gain):
             raise ValueError(f"drive gains must be positive, got {slide_gain}, {spin_gain}")
         self.slide_gain, self.spin_gain = float(slide_gain), float(spin_gain)
-        self._gains = [self.slide_gain] * self._n + [self.spin_gain] * self._n
+        self._gains_per_s = [self.slide_gain] * self._n + [self.spin_gain] * self._n
+        self._sent_dt = 0.0  # the next step sends the new gains
 
     def _init_motors(self) -> None:
         # The speed clamp set here stays with Bullet's motor; later array commands keep it.
@@ -259,46 +349,74 @@ class TableSim:
         friction: float | None = None,
         restitution: float | None = None,
         linear_damping: float | None = None,
+        rolling_resistance: float | None = None,
     ) -> None:
-        """Change the ball's physical parameters (domain randomisation); None keeps a value."""
+        """Change the ball's physical parameters (domain randomisation); None keeps a value.
+
+        Args:
+            mass: kg.
+            friction: the ball material's friction; each contact averages it with the other
+                material's, as the authors' engine does.
+            restitution: the restitution of every contact the ball makes.
+            linear_damping: Bullet's linear damping of the ball.
+            rolling_resistance: deceleration of a rolling ball in units of g.
+        """
         values = {
             "mass": mass,
             "friction": friction,
             "restitution": restitution,
             "linear_damping": linear_damping,
+            "rolling_resistance": rolling_resistance,
         }
         for key, value in values.items():
             if value is not None and (not math.isfinite(value) or value < 0):
                 raise ValueError(f"ball {key} must be a finite non-negative number, got {value}")
         if mass is not None and mass <= 0:
             raise ValueError(f"ball mass must be positive, got {mass}")
+        if restitution is not None and restitution > 1:
+            raise ValueError(f"ball restitution must be in [0, 1], got {restitution}")
         self.ball_mass = self.ball_mass if mass is None else float(mass)
         self.ball_friction = self.ball_friction if friction is None else float(friction)
         self.ball_restitution = self.ball_restitution if restitution is None else float(restitution)
         self.ball_damping = self.ball_damping if linear_damping is None else float(linear_damping)
+        if rolling_resistance is not None:
+            self.rolling_resistance = float(rolling_resistance)
         self._apply_ball_dynamics()
 
     def _apply_ball_dynamics(self) -> None:
+        table_friction = T.combine(self.ball_friction, T.TABLE_MATERIAL.dynamic_friction)
+        # The ball on a figurine departs from the authors' average (table.py says why); a
+        # randomised ball friction scales it in proportion.
+        figurine_friction = (
+            T.BALL_FIGURINE_FRICTION * self.ball_friction / T.BALL_MATERIAL.dynamic_friction
+        )
+        self._p.changeDynamics(
+            self.body, -1, lateralFriction=table_friction, restitution=T.TABLE_MATERIAL.restitution
+        )
+        for idx in self._spin_idx:
+            self._p.changeDynamics(
+                self.body,
+                idx,
+                lateralFriction=figurine_friction,
+                restitution=T.FIGURINE_MATERIAL.restitution,
+            )
+        # A rolling resistance torque mu * N slows a rolling solid sphere by (5/7) g mu / r;
+        # Bullet's torque coefficient for the ball on the table is the ball's rolling friction
+        # times the table's friction.
+        rolling = 1.4 * self.rolling_resistance * T.BALL_RADIUS / table_friction
         self._p.changeDynamics(
             self.ball,
             -1,
             mass=self.ball_mass,
-            lateralFriction=self.ball_friction,
-            # Bullet multiplies the restitution of the two bodies in contact. Every material of
-            # the spec bounces with 0.5, so a ball contact should too: the ball carries
-            # restitution / 0.5 and everything it can touch carries 0.5. Friction keeps
-            # Bullet's product of the spec's values (0.05 on the table, 0.02 on figurines);
-            # averaged values (0.3) make a rolling ball climb the side walls at 5 m/s.
-            restitution=self.ball_restitution / T.SURFACE_RESTITUTION,
+            lateralFriction=1.0,
+            restitution=self.ball_restitution / T.TABLE_MATERIAL.restitution,
+            rollingFriction=rolling,
             linearDamping=self.ball_damping,
             angularDamping=0.0,
-            # A sphere a little smaller than the ball, so the sweep does not touch the floor.
-            ccdSweptSphereRadius=0.9 * T.BALL_RADIUS,
+            ccdSweptSphereRadius=0.0,
         )
 
     def _spawn_ball(self) -> None:
-        # Maximal coordinates plus a swept sphere give continuous collision detection, so a
-        # 15 m/s ball cannot jump through a figurine between two 240 Hz steps.
         with _quiet_stdout():
             self.ball = self._p.loadURDF(
                 str(urdf_path("ball.urdf")), [0.0, 0.0, T.BALL_RADIUS], useMaximalCoordinates=True
@@ -321,27 +439,39 @@ class TableSim:
             ball_position, ball_velocity: see :meth:`place_ball`.
         """
         # One step with the ball alone, high above the table, clears what Bullet carries in the
-        # ball from step to step (cached contacts, split-impulse velocities): without it a
-        # reset state plays out a hair (1e-34) differently from the same state in a new table.
+        # ball from step to step (cached contacts, solver impulses): without it a reset state
+        # plays out a hair (1e-34) differently from the same state in a new table.
         self._p.resetBasePositionAndOrientation(self.ball, [0.0, 0.0, 5.0], [0.0, 0.0, 0.0, 1.0])
         self._p.resetBaseVelocity(self.ball, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+        self._set_step(1.0 / self.physics_hz)
         self._step_sim()
+        self._ball_cache = self._joint_cache = None
         slide = np.zeros(self._n) if slide is None else np.asarray(slide, dtype=float)
         spin = np.zeros(self._n) if spin is None else np.asarray(spin, dtype=float)
         if slide.shape != (self._n,) or spin.shape != (self._n,):
             raise ValueError(f"slide and spin need one value per rod in play ({self._n})")
         for idx, value in zip(self._joint_idx, np.concatenate([slide, spin])):
             self._p.resetJointState(self.body, idx, float(value), 0.0)
+        self._joint_cache = None
         self.place_ball(ball_position, ball_velocity)
         self.command("position", [*slide, *spin])
 
-    def place_ball(self, position: Sequence[float], velocity: Sequence[float] = (0.0, 0.0)) -> None:
+    def place_ball(
+        self,
+        position: Sequence[float],
+        velocity: Sequence[float] = (0.0, 0.0),
+        *,
+        rolling: bool = False,
+    ) -> None:
         """Put the ball somewhere, leaving the rods as they are (a serve in a running game).
 
         Args:
             position: (x, y) on the surface, or (x, y, z).
-            velocity: (vx, vy) or (vx, vy, vz); the ball is given the spin of rolling without
-                slipping, so it does not skid when it starts.
+            velocity: (vx, vy) or (vx, vy, vz). The ball starts without spin, sliding, as a
+                shot leaves a foot: the table's friction makes it roll within a few metres. (A
+                ball given the spin of rolling at 15 m/s climbs a wall it meets: friction on
+                its spinning face threw it 0.26 m up.)
+            rolling: start with the spin of rolling without slipping instead.
         """
         pos = [float(v) for v in position]
         vel = [float(v) for v in velocity]
@@ -351,9 +481,10 @@ class TableSim:
             vel.append(0.0)
         if len(pos) != 3 or len(vel) != 3:
             raise ValueError("ball position and velocity take 2 (x, y) or 3 (x, y, z) values")
-        rolling = [-vel[1] / T.BALL_RADIUS, vel[0] / T.BALL_RADIUS, 0.0]
         self._p.resetBasePositionAndOrientation(self.ball, pos, [0.0, 0.0, 0.0, 1.0])
-        self._p.resetBaseVelocity(self.ball, vel, rolling)
+        spin = [-vel[1] / T.BALL_RADIUS, vel[0] / T.BALL_RADIUS, 0.0] if rolling else [0.0] * 3
+        self._p.resetBaseVelocity(self.ball, vel, spin)
+        self._ball_cache = None
 
     def command(self, mode: str, targets: Sequence[float]) -> None:
         """Set the drives' targets for every joint in play.
@@ -381,22 +512,16 @@ class TableSim:
         if len(targets) != 2 * self._n:
             raise ValueError(f"need {2 * self._n} targets (slides, then spins), got {len(targets)}")
         if mode == "position":
-            clipped = [
+            self._targets = [
                 lo if t < lo else hi if t > hi else t
                 for t, lo, hi in zip(targets, self._lower, self._upper)
             ]
-            self._motor_array(
-                self.body,
-                self._joint_idx,
-                pybullet.POSITION_CONTROL,
-                targetPositions=clipped,
-                forces=self._max_force,
-                positionGains=self._gains,
-            )
+            self._send_position(self._dt)
         elif mode == "velocity":
             clipped = [
                 -m if t < -m else m if t > m else t for t, m in zip(targets, self._max_speed)
             ]
+            self._velocity_targets = clipped
             self._motor_array(
                 self.body,
                 self._joint_idx,
@@ -409,17 +534,31 @@ class TableSim:
                 -m if t < -m else m if t > m else t for t, m in zip(targets, self._max_force)
             ]
 
+    def _send_position(self, dt: float) -> None:
+        # Bullet's position gain is per physics step: the speed it asks for is gain * error / dt.
+        self._motor_array(
+            self.body,
+            self._joint_idx,
+            pybullet.POSITION_CONTROL,
+            targetPositions=self._targets,
+            forces=self._max_force,
+            positionGains=[g * dt for g in self._gains_per_s],
+        )
+        self._sent_dt = dt
+
     def step(self) -> tuple[int, bool]:
         """Advance one control step.
 
         Returns:
             ``(goal, out_of_table)``: goal is :data:`HOME_SCORED`, :data:`AWAY_SCORED` or
-            :data:`NO_GOAL`. Stepping stops at the substep where either event happens.
+            :data:`NO_GOAL`. Stepping stops at the physics step where either event happens.
         """
+        self._set_step(self.control_dt / self._steps_needed())
+        self._ball_cache = self._joint_cache = None
         step, pose, ball = self._step_sim, self._base_pose, self.ball
         torque = self._mode == "torque"
         line, half = T.GOAL_LINE_X, T.GOAL_HALF_WIDTH
-        for _ in range(self.substeps):
+        for _ in range(self._steps):
             if torque:
                 self._motor_array(
                     self.body, self._joint_idx, pybullet.TORQUE_CONTROL, forces=self._torques
@@ -427,25 +566,107 @@ class TableSim:
             step()
             (x, y, z), _ = pose(ball)
             if (x > line or x < -line) and -half <= y <= half:
+                self.physics_steps += self._steps
                 return (HOME_SCORED if x > 0 else AWAY_SCORED), False
             if z > T.OUT_OF_TABLE_HEIGHT:
+                self.physics_steps += self._steps
                 return NO_GOAL, True
+        self.physics_steps += self._steps
         return NO_GOAL, False
+
+    def _set_step(self, dt: float) -> None:
+        if dt != self._dt:
+            erp = _ERP_RATE * dt
+            self._set_engine(fixedTimeStep=dt, erp=erp, contactERP=erp)
+            self._dt = dt
+            self._steps = round(self.control_dt / dt)
+        if self._mode == "position" and dt != self._sent_dt:
+            self._send_position(dt)
+
+    def _steps_needed(self) -> int:
+        """Physics steps for the next control step: ``substeps`` unless the ball could touch a
+        wall or a figurine within it, else enough that nothing it could touch moves more than
+        ``contact_travel`` relative to it per step."""
+        dt = self.control_dt
+        x, y, z, _, _, vz = ball = self._ball()
+        speed = math.sqrt(ball[3] * ball[3] + ball[4] * ball[4] + vz * vz)
+        reach = speed * dt + _NEAR_MARGIN + T.BALL_RADIUS
+        wall = (
+            T.FIELD_HALF_WIDTH - abs(y) < reach
+            or T.FIELD_HALF_LENGTH - abs(x) < reach
+            or (vz < -_FALLING and z < reach)
+        )
+        figurine = 0.0
+        dz = z - T.ROD_HEIGHT
+        joints = None
+        for i, rod in enumerate(self.rods):
+            dx = x - rod.x
+            rho = math.sqrt(dx * dx + dz * dz)
+            if rho - reach > _LEG_OUTER:
+                continue  # beyond the reach of the rod's figurines at any spin
+            if joints is None:
+                joints = self._joints()
+            pos, vel = joints
+            v = self._speed_bound(i, pos, vel)
+            w = self._speed_bound(self._n + i, pos, vel)
+            if rho - reach >= _BODY_REACH:
+                phi = math.atan2(rod.direction * dx, -dz)
+                if _distance_to_leg_sweep(rho, phi, pos[self._n + i], w * dt) >= reach:
+                    continue
+            gap = reach + v * dt + _FIGURINE_HALF_WIDTH
+            slide, d = pos[i], rod.direction
+            if any(abs(d * (slide + off) - y) < gap for off in rod.figurine_offsets):
+                figurine = max(figurine, v + w * _LEG_OUTER)
+        if not wall and not figurine:
+            return self.substeps
+        # A kick can send the ball off at (1 + restitution) times the foot's speed on top of
+        # its own, and it may then meet anything else within the same control step.
+        relative = speed + (1 + T.BALL_FIGURINE_RESTITUTION) * figurine
+        return max(self.substeps, math.ceil(relative * dt / self.contact_travel))
+
+    def _speed_bound(self, j: int, pos: Sequence[float], vel: Sequence[float]) -> float:
+        """The fastest joint ``j`` can move within the next control step.
+
+        A position drive asks for gain * error (clamped to its top speed) and gets there from
+        the speed it has, so its speed stays between the two; a velocity drive likewise with
+        its target. Under torque control only the drive's top speed bounds it. The slack
+        covers a drive overshooting the speed it asks for.
+        """
+        now = abs(vel[j])
+        top = self._max_speed[j]
+        if self._mode == "position":
+            asked = self._gains_per_s[j] * abs(self._targets[j] - pos[j])
+        elif self._mode == "velocity":
+            asked = abs(self._velocity_targets[j])
+        else:
+            asked = top
+        return min(top, 1.2 * max(now, asked) + 0.02 * top)
+
+    def _ball(self) -> tuple[float, float, float, float, float, float]:
+        if self._ball_cache is None:
+            (x, y, z), _ = self._base_pose(self.ball)
+            (vx, vy, vz), _ = self._base_vel(self.ball)
+            self._ball_cache = (x, y, z, vx, vy, vz)
+        return self._ball_cache
+
+    def _joints(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        if self._joint_cache is None:
+            states = self._joint_states(self.body, self._joint_idx)
+            self._joint_cache = tuple(s[0] for s in states), tuple(s[1] for s in states)
+        return self._joint_cache
 
     def joint_states(self) -> tuple[list[float], list[float]]:
         """Positions and velocities of every joint in play: slides first, then spins."""
-        states = self._joint_states(self.body, self._joint_idx)
-        return [s[0] for s in states], [s[1] for s in states]
+        pos, vel = self._joints()
+        return list(pos), list(vel)
 
     def ball_state(self) -> BallState:
-        pos, _ = self._p.getBasePositionAndOrientation(self.ball)
-        vel, _ = self._p.getBaseVelocity(self.ball)
-        return BallState(np.array(pos), np.array(vel))
+        x, y, z, vx, vy, vz = self._ball()
+        return BallState(np.array([x, y, z]), np.array([vx, vy, vz]))
 
     def ball_xy(self) -> tuple[float, float, float, float]:
         """Ball x, y, vx, vy: the four ball numbers every observation holds."""
-        (x, y, _), _ = self._base_pose(self.ball)
-        (vx, vy, _), _ = self._base_vel(self.ball)
+        x, y, _, vx, vy, _ = self._ball()
         return x, y, vx, vy
 
     def figurine_positions(self) -> np.ndarray:

@@ -146,7 +146,7 @@ def test_block_episode_is_90_steps_unless_a_goal_ends_it(make_env):
 
 
 def test_render_fps_follows_the_control_step():
-    env = gym.make("Foosball-Block-v0", physics_hz=480, substeps=4)
+    env = gym.make("Foosball-Block-v0", physics_hz=480, control_hz=120)
     try:
         assert env.unwrapped.metadata["render_fps"] == 120
     finally:
@@ -160,7 +160,14 @@ def test_render_fps_follows_the_control_step():
         ({"shaping": "squared"}, "difference, potential"),
         ({"goal_reward": math.nan}, "finite"),
         ({"joint_velocities": "yes"}, "True or False"),
-        ({"substeps": 0}, "positive integer"),
+        ({"control_hz": 0}, "control_hz must be a positive integer"),
+        ({"physics_hz": 30}, "physics_hz .30. must be at least control_hz .60."),
+        ({"physics_hz": 250}, "whole multiple of control_hz"),
+        ({"physics_hz": 240.5}, "physics_hz must be a positive integer"),
+        ({"rolling_resistance": -0.01}, r"rolling_resistance must be a number in \[0.0, 0.5\]"),
+        ({"rolling_resistance": math.nan}, "rolling_resistance"),
+        ({"contact_travel": 0.5}, "contact_travel must be a number in"),
+        ({"rolling_resistance_range": (0.02, 0.01)}, "rolling_resistance_range"),
     ],
 )
 def test_bad_constructor_arguments_raise_a_clear_error(kwargs, message):

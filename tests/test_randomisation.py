@@ -32,7 +32,7 @@ def test_each_episode_draws_its_dynamics_within_the_ranges(make_env):
         for key, (lo, hi) in RANGES.items():
             assert lo <= d[key[: -len("_range")]] <= hi
         assert sim.ball_friction == d["ball_friction"] and sim.ball_mass == d["ball_mass"]
-        assert sim.slide_gain == pytest.approx(0.2 * d["drive_gain"])
+        assert sim.slide_gain == pytest.approx(48.0 * d["drive_gain"])
     assert len({d["ball_mass"] for d in drawn}) == 20
     # Seeded: the same seed draws the same dynamics.
     assert env.reset(seed=3)[1]["dynamics"] == drawn[3]

@@ -8,6 +8,7 @@ import sys
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yourdfpy
 
@@ -15,6 +16,7 @@ from foosball_gym import table as T
 from foosball_gym.simulator import TableSim, urdf_path
 
 ROOT = Path(__file__).resolve().parents[1]
+URDF_DIR = ROOT / "urdf"
 
 # SPEC §1, written out again on purpose: a change to table.py must be a change to this too.
 SPEC_RODS = {
@@ -61,10 +63,38 @@ def test_urdf_has_22_figurines_at_spec_offsets(urdf):
         offsets = sorted(round(j.origin[1, 3], 4) for j in mounts)
         assert offsets == sorted(round(o, 4) for o in T.rod(name).figurine_offsets)
         for j in mounts:
-            # Foot 0.011 m above the surface: the box centre hangs below the rod axis.
-            box = urdf.link_map[j.child].collisions[0].geometry.box.size
-            assert tuple(box) == pytest.approx((0.030, 0.034, 0.112))
-            assert 0.083 + j.origin[2, 3] - 0.112 / 2 == pytest.approx(0.011)
+            # The full 30 x 34 mm body from 0.040 m above the surface to the head, 0.040 m
+            # above the axis; below it the slim leg down to the foot, 0.011 m above the surface.
+            body, leg = urdf.link_map[j.child].collisions
+            centre = 0.083 + j.origin[2, 3]
+            assert tuple(body.geometry.box.size) == pytest.approx((0.030, 0.034, 0.083))
+            assert centre + body.origin[2, 3] - 0.083 / 2 == pytest.approx(0.040)
+            assert centre + body.origin[2, 3] + 0.083 / 2 == pytest.approx(0.083 + 0.040)
+            assert Path(leg.geometry.mesh.filename).name == "figurine_leg.obj"
+            assert centre + leg.origin[2, 3] == pytest.approx(0.0)  # the mesh is in heights
+
+
+def test_the_leg_has_the_cad_figurines_cross_sections():
+    vertices = np.array(
+        [
+            [float(v) for v in line.split()[1:]]
+            for line in (URDF_DIR / "figurine_leg.obj").read_text().splitlines()
+            if line.startswith("v ")
+        ]
+    )
+    assert vertices[:, 2].min() == pytest.approx(0.011)  # the sole
+    assert vertices[:, 2].max() == pytest.approx(0.040)
+    assert vertices[:, 1].min() == pytest.approx(-0.012) and vertices[:, 1].max() == pytest.approx(
+        0.012
+    )
+    for height, x0, x1 in ((0.012, -0.0025, 0.0029), (0.017, -0.0045, 0.0048)):
+        section = vertices[np.isclose(vertices[:, 2], height)]
+        assert section[:, 0].min() == pytest.approx(x0) and section[:, 0].max() == pytest.approx(x1)
+        # Full thickness out to |y| = 9 mm, then narrowing to a point at 12 mm.
+        flat = section[np.abs(section[:, 1]) <= 0.009 + 1e-9]
+        assert np.ptp(flat[:, 0]) == pytest.approx(x1 - x0)
+        tips = section[np.isclose(np.abs(section[:, 1]), 0.012)]
+        assert len(tips) == 2 and np.ptp(tips[:, 0]) == pytest.approx(0.0)
 
 
 def test_away_rods_are_turned_half_a_turn(urdf):
@@ -79,6 +109,7 @@ def test_committed_urdf_is_what_the_generator_writes():
 
     assert (ROOT / "urdf" / generate.TABLE_FILE).read_text() == generate.table_urdf()
     assert (ROOT / "urdf" / generate.BALL_FILE).read_text() == generate.ball_urdf()
+    assert (ROOT / "urdf" / generate.LEG_FILE).read_text() == generate.leg_obj()
 
 
 def test_urdf_loads_in_pybullet_with_every_rod():
@@ -111,6 +142,7 @@ def test_wheel_ships_the_urdf_and_an_installed_copy_runs(tmp_path):
         names = zf.namelist()
     assert "foosball_gym/urdf/foosball_table.urdf" in names
     assert "foosball_gym/urdf/ball.urdf" in names
+    assert "foosball_gym/urdf/figurine_leg.obj" in names
     site = tmp_path / "site"
     subprocess.run(
         [

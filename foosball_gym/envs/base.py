@@ -29,6 +29,7 @@ from foosball_gym.envs.observations import (
     mirrored_builder,
 )
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
+from foosball_gym.physics_options import check_physics
 from foosball_gym.policies.scripted import ScriptedTeam
 
 Policy = Callable[[np.ndarray], Any]
@@ -126,6 +127,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         ball_restitution_range: the restitution of every ball contact (spec: 0.5).
         ball_mass_range: the ball's mass in kg (spec: 0.022).
         drive_gain_range: a factor on the drives' position gains: how briskly they respond.
+        rolling_resistance_range: how a rolling ball slows, in units of g (default 0.01).
 
     Robust training (off by default):
         estimated_state: observe the ball and the opponent's rods as the real table does:
@@ -142,7 +144,13 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             steps (0: never).
         render_mode: ``None``, ``"rgb_array"`` or ``"human"`` (the PyBullet GUI).
         render_width, render_height: size of ``"rgb_array"`` frames (320 x 180).
-        physics_hz, substeps: physics rate (240) and physics steps per env step (4).
+        physics_hz: physics rate away from contacts (240); near a contact the simulator
+            steps finer (see ``contact_travel``). A whole multiple of ``control_hz``.
+        control_hz: env steps per second (60).
+        contact_travel: near a possible contact, physics steps are made fine enough that
+            nothing moves more than this (m) relative to what it may touch within one (0.005).
+        rolling_resistance: how a rolling ball slows, in units of g (0.01: a 1 m/s ball rolls
+            about 5 m).
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": T.CONTROL_HZ}
@@ -191,13 +199,16 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         ball_restitution_range: tuple[float, float] | None = None,
         ball_mass_range: tuple[float, float] | None = None,
         drive_gain_range: tuple[float, float] | None = None,
+        rolling_resistance_range: tuple[float, float] | None = None,
         estimated_state: bool = False,
         camera_noise: dict[str, Any] | None = None,
         render_mode: str | None = None,
         render_width: int = 320,
         render_height: int = 180,
         physics_hz: int = T.PHYSICS_HZ,
-        substeps: int = T.PHYSICS_HZ // T.CONTROL_HZ,
+        control_hz: int = T.CONTROL_HZ,
+        contact_travel: float = T.CONTACT_TRAVEL,
+        rolling_resistance: float = T.ROLLING_RESISTANCE,
     ) -> None:
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(
@@ -208,11 +219,12 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise ValueError(
                 f"unknown joint set {layout.joints!r}; allowed: {', '.join(JOINT_SETS)}"
             )
+        physics_hz, control_hz, contact_travel, rolling_resistance = check_physics(
+            physics_hz, control_hz, contact_travel, rolling_resistance
+        )
         for name, value in (
             ("render_width", render_width),
             ("render_height", render_height),
-            ("physics_hz", physics_hz),
-            ("substeps", substeps),
         ):
             if not isinstance(value, (int, np.integer)) or value <= 0:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
@@ -230,7 +242,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self.layout = layout
         self.render_mode = render_mode
         self.render_width, self.render_height = int(render_width), int(render_height)
-        self.metadata = {**self.metadata, "render_fps": physics_hz / substeps}
+        self.metadata = {**self.metadata, "render_fps": control_hz}
         self.weights = RewardWeights(
             goal=goal_reward,
             out_of_table=out_of_table_penalty,
@@ -253,18 +265,24 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
                 ("ball_restitution_range", ball_restitution_range, 0.0, 1.0),
                 ("ball_mass_range", ball_mass_range, 1e-4, 1.0),
                 ("drive_gain_range", drive_gain_range, 1e-3, 10.0),
+                ("rolling_resistance_range", rolling_resistance_range, 0.0, 0.5),
             )
             if value is not None
         }
 
-        self.dt = substeps / physics_hz
+        self.dt = 1.0 / control_hz
         self.sim = None
         if getattr(self, "_simulate", True):
             # Imported here: the real table builds a task's interface without the simulator.
             from foosball_gym.simulator import TableSim
 
             self.sim = TableSim(
-                layout.rods, physics_hz=physics_hz, substeps=substeps, gui=render_mode == "human"
+                layout.rods,
+                physics_hz=physics_hz,
+                control_hz=control_hz,
+                contact_travel=contact_travel,
+                rolling_resistance=rolling_resistance,
+                gui=render_mode == "human",
             )
             self._base_gains = (self.sim.slide_gain, self.sim.spin_gain)
         n = len(layout.rods)
@@ -453,6 +471,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             friction=drawn.get("ball_friction"),
             restitution=drawn.get("ball_restitution"),
             mass=drawn.get("ball_mass"),
+            rolling_resistance=drawn.get("rolling_resistance"),
         )
         if "drive_gain" in drawn:
             slide, spin = self._base_gains

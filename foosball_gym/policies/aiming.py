@@ -36,7 +36,7 @@ _BLOCK = T.FIGURINE_SIZE[1] / 2 + T.BALL_RADIUS
 # A fast bank shot keeps only about a quarter of its sideways speed in the simulator, but
 # planning with that chose steeper, less accurate kicks and scored less (40 % against 45 %
 # over 300 obstacle layouts) than planning with the nominal half.
-_WALL_RESTITUTION = T.SURFACE_RESTITUTION
+_WALL_RESTITUTION = T.BALL_TABLE_RESTITUTION
 
 
 def offset_for_angle(angle: float) -> float:

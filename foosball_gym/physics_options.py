@@ -1,0 +1,48 @@
+"""The simulator's physics options, checked without the simulator (the real table builds a
+task's interface, options and all, where pybullet may not be installed)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from foosball_gym import table as T
+
+
+def check_physics(
+    physics_hz: object,
+    control_hz: object,
+    contact_travel: object = T.CONTACT_TRAVEL,
+    rolling_resistance: object = T.ROLLING_RESISTANCE,
+) -> tuple[int, int, float, float]:
+    """Validate the physics options; returns them as (int, int, float, float).
+
+    Raises:
+        ValueError: naming the option and the values it allows.
+    """
+    for name, value in (("physics_hz", physics_hz), ("control_hz", control_hz)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+            raise ValueError(f"{name} must be a positive integer (Hz), got {value!r}")
+    if physics_hz < control_hz:
+        raise ValueError(
+            f"physics_hz ({physics_hz}) must be at least control_hz ({control_hz}): the "
+            f"physics cannot step more coarsely than the controller acts"
+        )
+    if physics_hz % control_hz:
+        raise ValueError(
+            f"physics_hz ({physics_hz}) must be a whole multiple of control_hz ({control_hz}), "
+            f"e.g. {control_hz * max(1, round(physics_hz / control_hz))}"
+        )
+    for name, value, low, high in (
+        ("contact_travel", contact_travel, 1e-4, 0.02),
+        ("rolling_resistance", rolling_resistance, 0.0, 0.5),
+    ):
+        try:
+            number = float(value)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            number = math.nan
+        if isinstance(value, bool) or not low <= number <= high:
+            unit = " m" if name == "contact_travel" else ""
+            raise ValueError(f"{name} must be a number in [{low}, {high}]{unit}, got {value!r}")
+    return int(physics_hz), int(control_hz), float(contact_travel), float(rolling_resistance)
