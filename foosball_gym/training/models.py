@@ -4,13 +4,23 @@ from __future__ import annotations
 
 import json
 import pickle
+import warnings
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.training.run import ALGOS, CONFIG_FILE, MODEL_FILE, NORM_FILE
+from foosball_gym.training.run import (
+    ALGOS,
+    CONFIG_FILE,
+    MODEL_FILE,
+    NORM_FILE,
+    PhysicsMismatchWarning,
+    physics_mismatch,
+)
 from foosball_gym.training.snapshot import PolicySnapshot
+
+__all__ = ["LoadedPolicy", "ModelLoadError", "PhysicsMismatchWarning", "load_policy"]
 
 
 class ModelLoadError(ValueError):
@@ -30,13 +40,18 @@ def load_policy(spec: str | Path) -> LoadedPolicy:
 
     The environment id and options come from the run's ``config.json`` (next to the zip, or
     one level up for a checkpoint); a bare zip without one loads with ``env_id=None``.
+
+    Warns with :class:`PhysicsMismatchWarning` where the model was trained on another physics
+    revision than the current one; a model without a record (a run from before runs recorded
+    it, or a bare zip) counts as revision 1.
     """
     text = str(spec)
     if text.startswith("builtin:"):
         from foosball_gym.training.builtin import builtin_path
 
-        return load_policy(builtin_path(text.split(":", 1)[1]))
-    path = Path(text)
+        path = builtin_path(text.split(":", 1)[1])
+    else:
+        path = Path(text)
     if path.is_dir():
         run_dir, zip_path = path, path / MODEL_FILE
         if not zip_path.exists():
@@ -81,6 +96,9 @@ def load_policy(spec: str | Path) -> LoadedPolicy:
             raise ModelLoadError(f"cannot read normalisation statistics {norm}: {err}") from err
     else:
         snapshot = PolicySnapshot(model.policy)
+    mismatch = physics_mismatch(config, f"the model {text}")
+    if mismatch:
+        warnings.warn(mismatch, PhysicsMismatchWarning, stacklevel=2)
     return LoadedPolicy(
         policy=snapshot,
         env_id=(config or {}).get("env_id"),

@@ -2,7 +2,8 @@
 
 A run directory holds::
 
-    config.json            the resolved configuration (what --resume reads back)
+    config.json            the resolved configuration (what --resume reads back), and under
+                           "physics" the physics the run was trained on (see physics_record)
     model.zip              the final model (SB3)
     vecnormalize.pkl       observation-normalisation statistics, if used
     checkpoints/           periodic checkpoints, written atomically; latest.json names the last
@@ -17,7 +18,9 @@ from __future__ import annotations
 import csv
 import json
 import time
+import warnings
 from dataclasses import asdict, dataclass, field, fields
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +33,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 import foosball_gym  # noqa: F401  (registers the ids)
+from foosball_gym.table import PHYSICS_REVISION
 from foosball_gym.training.evaluation import evaluate
 from foosball_gym.training.pretrain import clone, collect
 from foosball_gym.training.selfplay import OpponentActionWrapper, SelfPlayCallback, SelfPlayVecEnv
@@ -42,6 +46,58 @@ CONFIG_FILE = "config.json"
 MODEL_FILE = "model.zip"
 NORM_FILE = "vecnormalize.pkl"
 BEST_DIR = "best"
+# Runs from before config.json recorded its physics were all trained on the first revision.
+LEGACY_PHYSICS_REVISION = 1
+
+
+class PhysicsMismatchWarning(UserWarning):
+    """A model or run was trained on another revision of the simulated physics than this one."""
+
+
+def physics_record() -> dict[str, Any]:
+    """The physics this installation simulates, as a run's ``config.json`` records it.
+
+    ``revision`` is :data:`foosball_gym.table.PHYSICS_REVISION`, the one that decides whether
+    a model meets the physics it was trained on; the package and PyBullet versions are there
+    to trace a difference the revision does not explain.
+    """
+    try:
+        pybullet = metadata.version("pybullet")
+    except metadata.PackageNotFoundError:
+        pybullet = None
+    return {
+        "revision": PHYSICS_REVISION,
+        "package_version": foosball_gym.__version__,
+        "pybullet": pybullet,
+    }
+
+
+def recorded_physics_revision(config: dict[str, Any] | None) -> int:
+    """The physics revision a run's ``config.json`` (as a dict, or None) says it trained on."""
+    physics = (config or {}).get("physics")
+    if isinstance(physics, dict) and physics.get("revision") is not None:
+        return int(physics["revision"])
+    return LEGACY_PHYSICS_REVISION
+
+
+def physics_mismatch(config: dict[str, Any] | None, name: str) -> str | None:
+    """Why ``name``, trained as ``config`` records, may not behave as it did in training; None
+    where it was trained on the current physics."""
+    recorded = recorded_physics_revision(config)
+    if recorded == PHYSICS_REVISION:
+        return None
+    if "physics" in (config or {}):
+        trained = f"{name} was trained on physics revision {recorded}"
+    else:
+        trained = (
+            f"{name} records no physics revision, so it was trained on revision {recorded} "
+            "(the record was introduced after that revision)"
+        )
+    return (
+        f"{trained}, but foosball_gym {foosball_gym.__version__} simulates physics revision "
+        f"{PHYSICS_REVISION}: its results may differ from those it reached in training. "
+        "Retraining it on the current physics is advised."
+    )
 
 
 @dataclass
@@ -125,7 +181,14 @@ class TrainConfig:
             self.self_play = two_player
 
     def save(self, path: Path) -> None:
-        _atomic_write_text(path, json.dumps(asdict(self), indent=2))
+        """Write the configuration with the record of the physics it is about to train on.
+
+        The record is not a field: it describes the physics of this installation, not a choice,
+        so a configuration loaded from an older run and saved for a new one gets the current
+        record. :meth:`load` ignores it.
+        """
+        data = {**asdict(self), "physics": physics_record()}
+        _atomic_write_text(path, json.dumps(data, indent=2))
 
     @classmethod
     def load(cls, path: Path) -> TrainConfig:
@@ -381,6 +444,14 @@ def train(
     th.set_num_threads(config.torch_threads)
     if resume:
         config = TrainConfig.load(out / CONFIG_FILE)
+        mismatch = physics_mismatch(json.loads((out / CONFIG_FILE).read_text()), f"the run {out}")
+        if mismatch:
+            # config.json keeps the old revision, so the resumed model goes on warning as well.
+            warnings.warn(
+                f"{mismatch} Resuming continues it on revision {PHYSICS_REVISION}.",
+                PhysicsMismatchWarning,
+                stacklevel=2,
+            )
     config.check()
     out.mkdir(parents=True, exist_ok=True)
     if not resume:
