@@ -155,6 +155,9 @@ _NEAR_MARGIN = 0.002
 # 0.01 per 240 Hz step keeps 0.48-0.51, and a ball at rest still sits on the surface to 0.01 mm.
 # Per second, so that finer steps do not push harder.
 _ERP_RATE = 0.01 * T.PHYSICS_HZ
+# Near a wall alone, physics steps may be this many times the contact travel (see
+# _steps_needed): rebounds keep 0.48-0.51 of the normal speed even at 20 mm per step.
+_WALL_TRAVEL_FACTOR = 2.0
 # A ball falling faster than this (m/s) can bounce on the surface; slower, it rolls or rests.
 _FALLING = 0.3
 
@@ -304,7 +307,6 @@ class TableSim:
         self._targets = [0.0] * (2 * self._n)
         self._velocity_targets = [0.0] * (2 * self._n)
         self._sent_dt = 0.0
-        self._steps = self.substeps
         # What the last reads of the ball and the joints gave, until the world moves.
         self._ball_cache: tuple[float, float, float, float, float, float] | None = None
         self._joint_cache: tuple[tuple[float, ...], tuple[float, ...]] | None = None
@@ -553,12 +555,28 @@ class TableSim:
             ``(goal, out_of_table)``: goal is :data:`HOME_SCORED`, :data:`AWAY_SCORED` or
             :data:`NO_GOAL`. Stepping stops at the physics step where either event happens.
         """
-        self._set_step(self.control_dt / self._steps_needed())
+        steps, figurine = self._steps_needed(self.control_dt)
+        if not figurine:
+            return self._advance(self.control_dt, steps)
+        # A figurine may meet the ball: decide again for each base step, over which a drive
+        # moves a figurine far less than over a whole control step, so fewer are fine.
+        base = 1.0 / self.physics_hz
+        for _ in range(self.substeps):
+            steps, _ = self._steps_needed(base)
+            result = self._advance(base, steps)
+            if result != (NO_GOAL, False):
+                return result
+        return NO_GOAL, False
+
+    def _advance(self, duration: float, steps: int) -> tuple[int, bool]:
+        """Step ``duration`` seconds in ``steps`` equal physics steps, watching for goals."""
+        self._set_step(duration / steps)
         self._ball_cache = self._joint_cache = None
         step, pose, ball = self._step_sim, self._base_pose, self.ball
         torque = self._mode == "torque"
         line, half = T.GOAL_LINE_X, T.GOAL_HALF_WIDTH
-        for _ in range(self._steps):
+        self.physics_steps += steps
+        for _ in range(steps):
             if torque:
                 self._motor_array(
                     self.body, self._joint_idx, pybullet.TORQUE_CONTROL, forces=self._torques
@@ -566,12 +584,9 @@ class TableSim:
             step()
             (x, y, z), _ = pose(ball)
             if (x > line or x < -line) and -half <= y <= half:
-                self.physics_steps += self._steps
                 return (HOME_SCORED if x > 0 else AWAY_SCORED), False
             if z > T.OUT_OF_TABLE_HEIGHT:
-                self.physics_steps += self._steps
                 return NO_GOAL, True
-        self.physics_steps += self._steps
         return NO_GOAL, False
 
     def _set_step(self, dt: float) -> None:
@@ -579,15 +594,15 @@ class TableSim:
             erp = _ERP_RATE * dt
             self._set_engine(fixedTimeStep=dt, erp=erp, contactERP=erp)
             self._dt = dt
-            self._steps = round(self.control_dt / dt)
         if self._mode == "position" and dt != self._sent_dt:
             self._send_position(dt)
 
-    def _steps_needed(self) -> int:
-        """Physics steps for the next control step: ``substeps`` unless the ball could touch a
-        wall or a figurine within it, else enough that nothing it could touch moves more than
-        ``contact_travel`` relative to it per step."""
-        dt = self.control_dt
+    def _steps_needed(self, dt: float) -> tuple[int, bool]:
+        """Physics steps for the next ``dt`` seconds, and whether a figurine may meet the ball
+        within them: one step per base step unless the ball could touch a wall or a figurine,
+        else enough that nothing it could touch moves more than ``contact_travel`` relative to
+        it per step."""
+        least = max(1, round(dt * self.physics_hz))
         x, y, z, _, _, vz = ball = self._ball()
         speed = math.sqrt(ball[3] * ball[3] + ball[4] * ball[4] + vz * vz)
         reach = speed * dt + _NEAR_MARGIN + T.BALL_RADIUS
@@ -617,12 +632,20 @@ class TableSim:
             slide, d = pos[i], rod.direction
             if any(abs(d * (slide + off) - y) < gap for off in rod.figurine_offsets):
                 figurine = max(figurine, v + w * _LEG_OUTER)
-        if not wall and not figurine:
-            return self.substeps
+        if not figurine:
+            if not wall:
+                return least, False
+            # A wall is flat: how deep the ball gets in before it bounces does not turn the
+            # bounce, so walls alone need only half the resolution of a figurine's round end.
+            travel = _WALL_TRAVEL_FACTOR * self.contact_travel
+            return max(least, math.ceil(min(speed, T.RESOLVED_SPEED) * dt / travel)), False
         # A kick can send the ball off at (1 + restitution) times the foot's speed on top of
         # its own, and it may then meet anything else within the same control step.
         relative = speed + (1 + T.BALL_FIGURINE_RESTITUTION) * figurine
-        return max(self.substeps, math.ceil(relative * dt / self.contact_travel))
+        # Faster than the spec's fastest ball only a foot swinging at full speed goes; it is
+        # resolved as coarsely as a 20 m/s ball, so a step's travel grows with its speed.
+        relative = min(relative, T.RESOLVED_SPEED)
+        return max(least, math.ceil(relative * dt / self.contact_travel)), True
 
     def _speed_bound(self, j: int, pos: Sequence[float], vel: Sequence[float]) -> float:
         """The fastest joint ``j`` can move within the next control step.

@@ -49,10 +49,10 @@ FIGURINE_CENTRE_BELOW_AXIS = FIGURINE_SIZE[2] / 2 - FIGURINE_HEAD_ABOVE_AXIS
 FIGURINE_FOOT_BELOW_AXIS = ROD_HEIGHT - FIGURINE_FOOT_HEIGHT
 FIGURINE_MASS = 0.025
 # Where it meets the ball the authors' CAD figurine is a slim leg, not the overall box. Its
-# cross-sections, as (height above the surface, x from, x to) in metres, from the sole up; the
-# leg is FIGURINE_LEG_HALF_WIDTH wide either side along y, at full thickness out to
-# FIGURINE_LEG_FLAT_HALF_WIDTH, its ends narrowing to a point. Above FIGURINE_LEG_TOP the
-# figurine is the full box (a ball on the table reaches only 0.0345 m high).
+# cross-sections, as (height above the surface, x from, x to) in metres, from the sole up: at
+# full thickness out to FIGURINE_LEG_FLAT_HALF_WIDTH either side along y, then narrowing to a
+# point at FIGURINE_LEG_HALF_WIDTH. Above FIGURINE_LEG_TOP the figurine is the full box (a ball
+# on the table reaches only 0.0345 m high).
 FIGURINE_LEG_SECTIONS = (
     (0.011, -0.0020, 0.0024),
     (0.012, -0.0025, 0.0029),
@@ -62,10 +62,14 @@ FIGURINE_LEG_SECTIONS = (
 FIGURINE_LEG_FLAT_HALF_WIDTH = 0.009
 FIGURINE_LEG_HALF_WIDTH = 0.012
 FIGURINE_LEG_TOP = FIGURINE_LEG_SECTIONS[-1][0]
+# The simulated leg: the convex hull of these cross-sections (as above), each with rounded
+# ends from FIGURINE_LEG_FLAT_HALF_WIDTH to FIGURINE_LEG_HALF_WIDTH.
+FIGURINE_LEG_HULL = FIGURINE_LEG_SECTIONS
+
 # The farthest any point of a figurine gets from its rod's axis (the sole's edge): a spinning
 # rod reaches no further.
 FIGURINE_REACH = math.hypot(
-    FIGURINE_FOOT_BELOW_AXIS, max(-FIGURINE_LEG_SECTIONS[0][1], FIGURINE_LEG_SECTIONS[0][2])
+    FIGURINE_FOOT_BELOW_AXIS, max(-FIGURINE_LEG_HULL[0][1], FIGURINE_LEG_HULL[0][2])
 )
 
 # Drives (per rod).
@@ -135,7 +139,10 @@ AWAY_SCORED = -1
 # what it may touch within one physics step.
 PHYSICS_HZ = 240
 CONTROL_HZ = 60
-CONTACT_TRAVEL = 0.01
+CONTACT_TRAVEL = 0.005
+# Relative speeds up to this (m/s; the fastest ball of SPEC §1) are resolved to CONTACT_TRAVEL;
+# beyond it (a foot swinging at full speed) a physics step's travel grows in proportion.
+RESOLVED_SPEED = 20.0
 
 # Raised whenever a change to the simulated physics (contacts, shapes, materials, stepping) can
 # change what a policy meets; runs record it, and loading a model trained on another revision

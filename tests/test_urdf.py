@@ -95,6 +95,13 @@ def test_the_leg_has_the_cad_figurines_cross_sections():
         assert np.ptp(flat[:, 0]) == pytest.approx(x1 - x0)
         tips = section[np.isclose(np.abs(section[:, 1]), 0.012)]
         assert len(tips) == 2 and np.ptp(tips[:, 0]) == pytest.approx(0.0)
+        # Between them the ends are round: every point lies on or inside the ellipse through
+        # the corners and the tip, so no facet sticks out.
+        mid, half = (x0 + x1) / 2, (x1 - x0) / 2
+        end = section[np.abs(section[:, 1]) > 0.009 + 1e-9]
+        ellipse = ((end[:, 0] - mid) / half) ** 2 + ((np.abs(end[:, 1]) - 0.009) / 0.003) ** 2
+        np.testing.assert_allclose(ellipse, 1.0, atol=1e-3)  # 6 digits in the file
+        assert len(end) >= 20  # finely faceted
 
 
 def test_away_rods_are_turned_half_a_turn(urdf):
