@@ -1,10 +1,10 @@
 """Aimed shots: which way to send the ball past the other team's figurines, and how.
 
-A figurine's foot is a box. Struck with its flat face, the ball leaves straight along +x; struck
-with a corner, it leaves along the line from the corner through its centre. So the sideways
-offset between ball and figurine at the moment of the kick sets the shot's angle. The table
-below was measured in the simulator by kicking a resting ball from the wind-up with the keeper
-at each offset; past 0.030 m the corner misses the ball.
+A figurine's leg is flat in front, 18 mm wide, with rounded ends. Struck with the flat, the ball
+leaves straight along +x; struck with a rounded end, at an angle that grows with the sideways
+offset between ball and figurine at the moment of the kick. The table below was measured in the
+simulator (``foosball_gym.physics_probes.corner_kick``, physics revision 2) by kicking a resting
+ball from the wind-up with the keeper at each offset; past 0.026 m the kick is too weak to aim.
 """
 
 from __future__ import annotations
@@ -17,8 +17,11 @@ import numpy as np
 from foosball_gym import table as T
 
 # Ball-minus-figurine y offset (m) -> shot angle from +x (degrees).
-_OFFSETS = np.array([0.0150, 0.0175, 0.0200, 0.0225, 0.0250, 0.0275, 0.0300])
-_ANGLES = np.array([0.0, 8.2, 21.5, 32.9, 41.9, 48.9, 54.3])
+_OFFSETS = np.arange(0.009, 0.0265, 0.001)
+_ANGLES = np.array(
+    [0.0, 2.6, 5.2, 7.7, 8.4, 11.0, 13.9, 18.6, 21.5, 24.3, 25.7, 30.2, 32.8, 38.6, 40.9, 44.5]
+    + [46.6, 52.1]
+)
 MAX_ANGLE = math.radians(float(_ANGLES[-1]))
 MIN_ANGLE = math.radians(10.0)
 # The error a kick at a given angle is allowed when its lane is judged (chosen by scoring over
@@ -31,8 +34,8 @@ _WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
 # A ball whose centre crosses the line within the opening is a goal; one that grazes a post
 # mostly goes in, so the lane only has to keep the centre a little inside.
 _GOAL = T.GOAL_HALF_WIDTH - 0.005
-# Half the width a figurine blocks: its own half width plus the ball's radius.
-_BLOCK = T.FIGURINE_SIZE[1] / 2 + T.BALL_RADIUS
+# Half the width a figurine blocks: its leg's half width plus the ball's radius.
+_BLOCK = T.FIGURINE_LEG_HALF_WIDTH + T.BALL_RADIUS
 # A fast bank shot keeps only about a quarter of its sideways speed in the simulator, but
 # planning with that chose steeper, less accurate kicks and scored less (40 % against 45 %
 # over 300 obstacle layouts) than planning with the nominal half.
