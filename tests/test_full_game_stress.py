@@ -1,4 +1,4 @@
-"""100,000 random-action steps of the full game: the physics stays sane."""
+"""50,000 random-action steps of the full game: the physics stays sane."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 
 from foosball_gym import table as T
 
-STEPS = 100_000
+STEPS = 50_000
 # A figurine can squeeze the ball against a wall or the floor with its drive's full force, so
 # the ball may sink in by up to the travel the simulator allows per physics step near a contact
 # (9 mm seen); "outside" means its centre crossed the wall or the surface.

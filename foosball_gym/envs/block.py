@@ -60,10 +60,17 @@ class BlockEnv(FoosballEnv):
     ## Arguments
     ``speed_range`` (m/s), and every keyword of :class:`FoosballEnv` (reward weights,
     ``shaping``, ``gamma``, ``joint_velocities``, ``observe_figurines``, ``render_mode``,
-    ``render_width``, ``render_height``, ``physics_hz``, ``substeps``).
+    ``render_width``, ``render_height``, and the physics options ``physics_hz``,
+    ``control_hz``, ``contact_travel``, ``rolling_resistance``).
 
     ## Version History
     - v0: first version.
+    - v0, physics revision 2 (ids kept: the package is unreleased): contacts keep their
+      restitution at every speed (no ball CCD; fine physics steps near a possible contact),
+      the CAD figurine's slim leg, the authors' materials (ball on figurine 0.05), rolling
+      resistance, a served ball starts sliding; options ``control_hz``, ``contact_travel``,
+      ``rolling_resistance`` and ``rolling_resistance_range`` (``substeps`` is gone:
+      ``physics_hz`` / ``control_hz``).
     """
 
     def __init__(self, *, speed_range: tuple[float, float] = (2.0, 7.0), **kwargs: Any) -> None:
