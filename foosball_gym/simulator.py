@@ -131,13 +131,6 @@ class BallState:
     velocity: np.ndarray  # (3,) m/s
 
 
-def _rod_spin_inertia(rod: T.Rod) -> float:
-    """The rod's moment of inertia about its axis, figurines included (kg m^2)."""
-    fx, _, fz = T.FIGURINE_SIZE
-    figurine = T.FIGURINE_MASS * (T.FIGURINE_CENTRE_BELOW_AXIS**2 + (fx * fx + fz * fz) / 12)
-    return T.ROD_MASS * T.ROD_RADIUS**2 / 2 + len(rod.figurine_offsets) * figurine
-
-
 # Where a figurine can be, in the plane across its rod (distances from the rod's axis): the
 # body, a box round the axis, reaches _BODY_REACH; the leg spans _LEG_INNER.._LEG_OUTER (the
 # reach of the sole) within _LEG_HALF_ANGLE either side of the line the spin angle points along.
@@ -284,13 +277,6 @@ class TableSim:
         self._max_speed = [T.SLIDE_MAX_SPEED] * self._n + [T.SPIN_MAX_SPEED] * self._n
         self._lower = [-r.slide_limit for r in self.rods] + [-T.SPIN_LIMIT] * self._n
         self._upper = [-v for v in self._lower]
-        moving = T.CARRIAGE_MASS + T.ROD_MASS
-        # The most a drive can change its joint's speed per second: what bounds where a rod can
-        # be by the end of a physics step.
-        self._accel = [
-            T.SLIDE_MAX_FORCE / (moving + len(r.figurine_offsets) * T.FIGURINE_MASS)
-            for r in self.rods
-        ] + [T.SPIN_MAX_TORQUE / _rod_spin_inertia(r) for r in self.rods]
         self.set_drive_gains(slide_gain, spin_gain)
 
         # Bullet keeps one friction and one restitution per body and multiplies two bodies'

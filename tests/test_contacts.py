@@ -126,3 +126,35 @@ def test_fine_steps_are_taken_only_near_a_contact(sim):
 def test_bad_physics_options_name_the_option_and_the_allowed_range(kwargs, message):
     with pytest.raises(ValueError, match=message):
         TableSim(["home_keeper"], **kwargs)
+
+
+def test_the_drives_never_outrun_the_speed_the_near_contact_test_assumes():
+    # Fine steps are chosen from a bound on how fast each rod can move within the step; if a
+    # rod outran it, a foot could reach the ball in a coarse step. Random targets, a ball
+    # knocking the keepers about.
+    rng = np.random.default_rng(0)
+    table = TableSim(["home_keeper", "away_keeper"])
+    worst = 0.0
+    try:
+        table.reset(ball_position=(0.0, 0.0), ball_velocity=(3.0, 1.0))
+        step = table._step_sim
+        peak = [0.0] * 4
+
+        def watched() -> None:
+            step()
+            for j, state in enumerate(table._joint_states(table.body, table._joint_idx)):
+                peak[j] = max(peak[j], abs(state[1]))
+
+        table._step_sim = watched
+        for k in range(600):
+            table.command("position", [*rng.uniform(-0.12, 0.12, 2), *rng.uniform(-6.2, 6.2, 2)])
+            pos, vel = table.joint_states()
+            bounds = [table._speed_bound(j, pos, vel) for j in range(4)]
+            peak[:] = [0.0] * 4
+            table.step()
+            worst = max(worst, *(p / b for p, b in zip(peak, bounds)))
+            if k % 60 == 0:
+                table.place_ball(rng.uniform(-0.5, 0.5, 2) * (1, 0.6), rng.uniform(-6, 6, 2))
+    finally:
+        table.close()
+    assert worst <= 1.0 + 1e-6
