@@ -542,9 +542,9 @@ class TableSim:
             :data:`NO_GOAL`. Stepping stops at the physics step where either event happens.
         """
         steps, figurine = self._steps_needed(self.control_dt)
-        if not figurine:
+        if not figurine or steps <= 2 * self.substeps:
             return self._advance(self.control_dt, steps)
-        # A figurine may meet the ball: decide again for each base step, over which a drive
+        # A figurine may meet the ball fast: decide again for each base step, over which a drive
         # moves a figurine far less than over a whole control step, so fewer are fine.
         base = 1.0 / self.physics_hz
         for _ in range(self.substeps):
