@@ -20,16 +20,6 @@ from foosball_gym.training.evaluation import evaluate  # noqa: E402
 from foosball_gym.training.models import PhysicsMismatchWarning, load_policy  # noqa: E402
 from foosball_gym.training.run import recorded_physics_revision  # noqa: E402
 
-# Shipped policies trained on an older physics revision that have lost their skill on the
-# current one, with what was measured; the README's results table says the same. Each is to be
-# retrained; until then the test of its skill is skipped with this reason, visibly.
-STALE = {
-    "score-resting": (
-        "trained on physics revision 1; on revision 2 it scores 90.6 % (500 seeds) against the "
-        "scripted 96.8 %; two retraining recipes lost the clone's skill under PPO (README)"
-    ),
-}
-
 EPISODES = 100
 # Measured over 500 seeded episodes each shipped policy beats its baseline (README); on 100 it
 # may trail by a shot or two, which is not what this test is for: it catches a broken policy.
@@ -59,8 +49,6 @@ def test_a_shipped_policy_says_which_physics_it_was_trained_on(name):
 
 @pytest.mark.parametrize("name", builtin_names())
 def test_a_shipped_policy_does_at_least_as_well_as_the_scripted_baseline(name):
-    if _revision(name) != T.PHYSICS_REVISION and name in STALE:
-        pytest.skip(f"builtin:{name}: {STALE[name]}")
     loaded = load_policy(f"builtin:{name}")
     env = gym.make(loaded.env_id, **loaded.env_kwargs)
     scripted = env.unwrapped.scripted_policy()
