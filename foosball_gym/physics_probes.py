@@ -421,3 +421,38 @@ def volley(sim: TableSim, speed: float, angle_deg: float) -> dict:
         "out_deg": math.degrees(math.atan2(bvy, bvx)),
         "out_speed": math.hypot(bvx, bvy),
     }
+
+
+def swinging_foot(sim: TableSim, ball_speed: float) -> dict:
+    """A foot spinning at the drive's top speed meets a ball: is it kicked, or passed through?
+
+    The keeper spins forwards at full speed (velocity control, 100 pi rad/s, from its feet
+    raised behind the rod) while the ball rolls at ``ball_speed`` along -x at the figurine (or
+    rests in front of it, x = keeper.x + 0.025, at 0). Physics that resolves the contact kicks
+    the ball forwards; a foot that jumped through it in one step leaves it on its way, or
+    behind the rod. Reported, not required: the foot's tip moves at 22.6 m/s, beyond what the
+    contact resolution is sized for.
+
+    Returns:
+        ``kicked``: the ball was last seen moving along +x faster than it came, in front of
+        the rod; ``speed_after``: its speed then (m/s); ``behind``: it ended behind the rod.
+    """
+    start_x = KEEPER.x + 0.025 if ball_speed == 0 else KEEPER.x + 0.025 + ball_speed * 0.03
+    sim.reset(
+        slide=[0.0],
+        spin=[WIND_UP_ANGLE],
+        ball_position=(start_x, 0.0),
+        ball_velocity=(-ball_speed, 0.0),
+    )
+    sim.command("velocity", [0.0, 100 * math.pi])
+    for _ in range(6):
+        goal, out = sim.step()
+        if goal != T.NO_GOAL or out:
+            break
+    x, _, vx, vy = sim.ball_xy()
+    sim.command("position", [0.0, 0.0])
+    return {
+        "kicked": vx > ball_speed and x > KEEPER.x,
+        "speed_after": math.hypot(vx, vy),
+        "behind": x < KEEPER.x,
+    }

@@ -9,10 +9,12 @@ How contacts stay right at every speed (measured; see ``benchmarks/physics_repor
 
 - Bullet's continuous collision detection would stop tunnelling, but its predictive contacts
   carry no restitution, so a fast ball died against a wall. The ball has none here. Instead,
-  whenever the ball or a figurine could reach the other, or the ball a wall, within the next
-  physics step, that step is split into finer ones, so that nothing moves more than
-  ``contact_travel`` relative to what it may touch. Far from everything the table runs at
-  ``physics_hz``.
+  before each control step the simulator bounds where the ball (by its speed) and each
+  figurine (by what its drive asks for) can get to. Where the ball could touch a figurine, a
+  wall or the surface from above within the step, the step is split into physics steps fine
+  enough that nothing moves more than ``contact_travel`` relative to what it may touch (twice
+  that near a wall alone, which is flat); while a figurine may meet a fast ball this is
+  decided again every base step. Far from everything the table runs at ``physics_hz``.
 - Bullet pushes penetrating bodies apart with a velocity (ERP) that adds to a bounce; with
   multibody contacts it cannot be split off, so its gain is kept near zero.
 - A position gain in Bullet acts per physics step; the drives' gains here are per second and
