@@ -13,7 +13,8 @@ import time
 import numpy as np
 import torch as th
 
-from foosball_gym.training.run import TrainConfig, build_model, make_env
+from foosball_gym.training.config import TrainConfig
+from foosball_gym.training.run import build_model, make_env
 from foosball_gym.training.selfplay import SelfPlayCallback, find_selfplay_env
 from foosball_gym.training.snapshot import PolicySnapshot
 

@@ -15,7 +15,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from foosball_gym.training.run import TrainConfig, plot_curve, read_curve, train
+from foosball_gym.training.config import TrainConfig
+from foosball_gym.training.run import plot_curve, read_curve, train
 
 
 def main() -> None:

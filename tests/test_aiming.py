@@ -10,6 +10,7 @@ import pytest
 
 from foosball_gym import table as T
 from foosball_gym.envs.interface import task_interface
+from foosball_gym.evaluation import evaluate
 from foosball_gym.policies.aiming import (
     MAX_ANGLE,
     clearance,
@@ -18,7 +19,6 @@ from foosball_gym.policies.aiming import (
     plan_shot,
 )
 from foosball_gym.policies.scripted import KICK_ANGLE, WIND_UP_ANGLE, ScriptedTeam, slide_for
-from foosball_gym.training.evaluation import evaluate
 
 WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
 KEEPER = T.rod("home_keeper")

@@ -15,10 +15,14 @@ from foosball_gym import table as T
 
 pytest.importorskip("stable_baselines3")
 
-from foosball_gym.training.builtin import builtin_names, builtin_path  # noqa: E402
-from foosball_gym.training.evaluation import evaluate  # noqa: E402
-from foosball_gym.training.models import PhysicsMismatchWarning, load_policy  # noqa: E402
-from foosball_gym.training.run import recorded_physics_revision  # noqa: E402
+from foosball_gym.evaluation import evaluate  # noqa: E402
+from foosball_gym.training.config import recorded_physics_revision  # noqa: E402
+from foosball_gym.training.models import (  # noqa: E402
+    PhysicsMismatchWarning,
+    builtin_names,
+    builtin_path,
+    load_policy,
+)
 
 EPISODES = 100
 # Measured over 500 seeded episodes each shipped policy beats its baseline (README); on 100 it

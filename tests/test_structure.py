@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -102,3 +103,175 @@ def test_only_the_simulated_table_reaches_the_simulator_from_the_hardware_side()
             assert "foosball_gym.simulator" not in source.replace(
                 "``foosball_gym.simulator``", ""
             ), path
+
+
+# Where each installed package's source lives: cli/ and urdf/ are installed into foosball_gym.
+SOURCES = {
+    "foosball_gym": PACKAGE,
+    "foosball_gym.cli": PACKAGE.parent / "cli",
+    "foosball_gym.urdf": PACKAGE.parent / "urdf",
+}
+
+
+def module_files(sources: dict[str, Path]) -> dict[str, Path]:
+    """Every module under ``sources`` (installed name: folder), by its installed name."""
+    found = {}
+    for package, folder in sources.items():
+        for path in folder.rglob("*.py"):
+            parts = path.relative_to(folder).with_suffix("").parts
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            found[".".join((package, *parts))] = path
+    return found
+
+
+def import_graph(modules: dict[str, Path]) -> dict[str, set[str]]:
+    """Which of ``modules`` each of them imports.
+
+    Imports inside functions count: they close a cycle as surely as those at the top, only
+    later. ``from a.b import c`` imports ``a.b.c`` where that is a module, else ``a.b``; the
+    packages a module's parents run first are left out, as a package that imports its own
+    modules is no cycle.
+    """
+    graph = {}
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        targets = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = package.split(".")
+                    parts = parts[: len(parts) - node.level + 1]
+                    base = ".".join([*parts, *([node.module] if node.module else [])])
+                names = [f"{base}.{alias.name}" for alias in node.names]
+            else:
+                continue
+            for imported in names:
+                while imported and imported not in modules:
+                    imported = imported.rpartition(".")[0]
+                if imported and imported != name:
+                    targets.add(imported)
+        graph[name] = targets
+    return graph
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """The modules along a cycle of ``graph``, the first repeated at the end; None if none."""
+    on_path: list[str] = []
+    done: set[str] = set()
+
+    def visit(node: str) -> list[str] | None:
+        on_path.append(node)
+        for nxt in sorted(graph[node]):
+            if nxt in on_path:
+                return [*on_path[on_path.index(nxt) :], nxt]
+            if nxt not in done:
+                cycle = visit(nxt)
+                if cycle:
+                    return cycle
+        on_path.pop()
+        done.add(node)
+        return None
+
+    for node in sorted(graph):
+        if node not in done:
+            cycle = visit(node)
+            if cycle:
+                return cycle
+    return None
+
+
+def test_no_module_imports_itself_back_through_others():
+    modules = module_files(SOURCES)
+    assert {"foosball_gym.cli", "foosball_gym.cli.train", "foosball_gym.urdf.generate"} <= set(
+        modules
+    )
+    cycle = find_cycle(import_graph(modules))
+    assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+def test_the_cycle_check_finds_a_cycle_closed_inside_a_function(tmp_path):
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("from pkg import a\n")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from pkg.sub import b\n")
+    (pkg / "sub" / "b.py").write_text("def later():\n    from .. import c\n")
+    (pkg / "c.py").write_text("import pkg.a\n")
+    assert find_cycle(import_graph(module_files({"pkg": pkg}))) == [
+        "pkg.a",
+        "pkg.sub.b",
+        "pkg.c",
+        "pkg.a",
+    ]
+    (pkg / "c.py").write_text("import pkg.sub\n")
+    assert find_cycle(import_graph(module_files({"pkg": pkg}))) is None
+
+
+# Put first in a fresh interpreter's code: torch and Stable-Baselines3 then fail to import, as
+# on an installation without the train extra.
+WITHOUT_TORCH = """
+import sys
+
+
+class _NotInstalled:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in ("torch", "stable_baselines3"):
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+        return None
+
+
+sys.meta_path.insert(0, _NotInstalled())
+try:
+    import torch
+except ImportError:
+    pass
+else:
+    raise AssertionError("torch was not blocked")
+"""
+
+
+def run_without_torch(code: str, *args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", WITHOUT_TORCH + code, *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=120,
+    )
+
+
+def test_evaluation_and_the_scripted_eval_command_need_no_torch(tmp_path):
+    code = """
+from foosball_gym.catalog import scripted_policy
+from foosball_gym.evaluation import EvalResult, evaluate
+
+result = evaluate(scripted_policy("Foosball-Block-v0"), "Foosball-Block-v0", episodes=2)
+assert isinstance(result, EvalResult) and result.episodes == 2, result
+
+from foosball_gym.cli import main
+
+sys.exit(main(sys.argv[1:]))
+"""
+    out = tmp_path / "eval.json"
+    argv = ["eval", "--policy", "scripted", "Foosball-Block-v0", "--episodes", "2"]
+    done = run_without_torch(code, *argv, "--json", str(out), cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "success rate" in done.stdout
+    assert json.loads(out.read_text())["episodes"] == 2
+
+
+def test_without_torch_the_cli_builds_and_names_the_extra_a_model_needs(tmp_path):
+    code = """
+from foosball_gym.cli import build_parser, main
+
+build_parser().parse_args(["train", "Foosball-Block-v0"])
+sys.exit(main(sys.argv[1:]))
+"""
+    done = run_without_torch(code, "eval", "builtin:block", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith("foosball eval: error:"), done.stderr
+    assert "foosball_gym[train]" in done.stderr and "Traceback" not in done.stderr

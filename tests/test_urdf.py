@@ -1,4 +1,5 @@
-"""The table URDF: what it holds matches the spec, it is up to date and it ships in the wheel."""
+"""The table URDF: what it holds matches the spec, it is up to date and it ships in the wheel
+(with the CLI, installed from cli/ the same way)."""
 
 from __future__ import annotations
 
@@ -127,8 +128,9 @@ def test_urdf_loads_in_pybullet_with_every_rod():
         sim.close()
 
 
-def test_wheel_ships_the_urdf_and_an_installed_copy_runs(tmp_path):
-    """Build a wheel, install it without the source tree on the path, make an env."""
+def test_wheel_ships_the_urdf_and_the_cli_and_an_installed_copy_runs(tmp_path):
+    """Build a wheel, install it without the source tree on the path, make an env and list
+    the environments through the installed CLI."""
     subprocess.run(
         [
             sys.executable,
@@ -150,6 +152,8 @@ def test_wheel_ships_the_urdf_and_an_installed_copy_runs(tmp_path):
     assert "foosball_gym/urdf/foosball_table.urdf" in names
     assert "foosball_gym/urdf/ball.urdf" in names
     assert "foosball_gym/urdf/figurine_leg.obj" in names
+    shipped_cli = {n for n in names if n.startswith("foosball_gym/cli/")}
+    assert shipped_cli == {f"foosball_gym/cli/{p.name}" for p in (ROOT / "cli").glob("*.py")}
     site = tmp_path / "site"
     subprocess.run(
         [
@@ -169,6 +173,9 @@ def test_wheel_ships_the_urdf_and_an_installed_copy_runs(tmp_path):
         "import foosball_gym, gymnasium as gym, sys;"
         "assert foosball_gym.__file__.startswith(sys.argv[1]), foosball_gym.__file__;"
         "env = gym.make('Foosball-Block-v0'); env.reset(seed=0); env.step([0.0]);"
+        "import foosball_gym.cli as cli;"
+        "assert cli.__file__.startswith(sys.argv[1]), cli.__file__;"
+        "assert cli.main(['envs']) == 0;"
         "print('ok')"
     )
     out = subprocess.run(

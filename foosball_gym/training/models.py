@@ -1,4 +1,8 @@
-"""Loading trained policies: from a run directory, a model zip, or a shipped name."""
+"""Loading trained policies: from a run directory, a model zip, or a shipped name.
+
+The policies shipped with the package live in ``foosball_gym/builtin/NAME/``, one run
+directory each, and load as ``builtin:NAME``.
+"""
 
 from __future__ import annotations
 
@@ -7,20 +11,23 @@ import pickle
 import warnings
 import zipfile
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.training.run import (
-    ALGOS,
-    CONFIG_FILE,
-    MODEL_FILE,
-    NORM_FILE,
-    PhysicsMismatchWarning,
-    physics_mismatch,
-)
+from foosball_gym.training.config import PhysicsMismatchWarning, physics_mismatch
+from foosball_gym.training.files import CONFIG_FILE, MODEL_FILE, NORM_FILE
+from foosball_gym.training.run import ALGOS
 from foosball_gym.training.snapshot import PolicySnapshot
 
-__all__ = ["LoadedPolicy", "ModelLoadError", "PhysicsMismatchWarning", "load_policy"]
+__all__ = [
+    "LoadedPolicy",
+    "ModelLoadError",
+    "PhysicsMismatchWarning",
+    "builtin_names",
+    "builtin_path",
+    "load_policy",
+]
 
 
 class ModelLoadError(ValueError):
@@ -35,6 +42,32 @@ class LoadedPolicy:
     source: str = ""
 
 
+def _builtin_root() -> Path:
+    return Path(str(resources.files("foosball_gym") / "builtin"))
+
+
+def builtin_names() -> list[str]:
+    """The names of the shipped policies, sorted."""
+    root = _builtin_root()
+    if not root.is_dir():
+        return []
+    return sorted(p.name for p in root.iterdir() if (p / MODEL_FILE).exists())
+
+
+def builtin_path(name: str) -> Path:
+    """The run directory of the shipped policy ``name``.
+
+    Raises:
+        ModelLoadError: no policy of that name is shipped; the message lists those that are.
+    """
+    names = builtin_names()
+    if name not in names:
+        raise ModelLoadError(
+            f"no built-in policy {name!r}; shipped: {', '.join(names) if names else 'none'}"
+        )
+    return _builtin_root() / name
+
+
 def load_policy(spec: str | Path) -> LoadedPolicy:
     """Load a policy from a run directory, a model ``.zip``, or ``builtin:NAME``.
 
@@ -47,8 +80,6 @@ def load_policy(spec: str | Path) -> LoadedPolicy:
     """
     text = str(spec)
     if text.startswith("builtin:"):
-        from foosball_gym.training.builtin import builtin_path
-
         path = builtin_path(text.split(":", 1)[1])
     else:
         path = Path(text)

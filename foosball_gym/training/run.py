@@ -1,16 +1,7 @@
-"""A training run: configuration, environments, model, callbacks, checkpoints, resume.
+"""A training run: environments, model, callbacks, checkpoints, resume.
 
-A run directory holds::
-
-    config.json            the resolved configuration (what --resume reads back), and under
-                           "physics" the physics the run was trained on (see physics_record)
-    model.zip              the final model (SB3)
-    vecnormalize.pkl       observation-normalisation statistics, if used
-    checkpoints/           periodic checkpoints, written atomically; latest.json names the last
-    eval.csv, eval.png     the evaluation curve: success rate and reward against timesteps
-    best/                  the model of the best evaluation so far
-    tb/                    TensorBoard logs
-    selfplay/              opponent snapshots and history.json (self-play runs)
+Its configuration is :class:`~foosball_gym.training.config.TrainConfig`; the files it writes
+are listed in :mod:`foosball_gym.training.files`.
 """
 
 from __future__ import annotations
@@ -19,12 +10,10 @@ import csv
 import json
 import time
 import warnings
-from dataclasses import asdict, dataclass, field, fields
-from importlib import metadata
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch as th
 from stable_baselines3 import PPO, SAC
@@ -33,176 +22,28 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 import foosball_gym  # noqa: F401  (registers the ids)
+from foosball_gym.evaluation import evaluate
 from foosball_gym.table import PHYSICS_REVISION
-from foosball_gym.training.evaluation import evaluate
+from foosball_gym.training.config import (
+    ALGORITHMS,
+    VEC_ENV_KINDS,
+    PhysicsMismatchWarning,
+    TrainConfig,
+    physics_mismatch,
+)
+from foosball_gym.training.files import (
+    BEST_DIR,
+    CONFIG_FILE,
+    MODEL_FILE,
+    NORM_FILE,
+    atomic_write_text,
+)
 from foosball_gym.training.pretrain import clone, collect
 from foosball_gym.training.selfplay import OpponentActionWrapper, SelfPlayCallback, SelfPlayVecEnv
 from foosball_gym.training.snapshot import PolicySnapshot
 
-ALGOS = {"ppo": PPO, "sac": SAC}
-VEC_ENVS = {"dummy": DummyVecEnv, "subproc": SubprocVecEnv}
-LR_SCHEDULES = ("constant", "linear")
-CONFIG_FILE = "config.json"
-MODEL_FILE = "model.zip"
-NORM_FILE = "vecnormalize.pkl"
-BEST_DIR = "best"
-# Runs from before config.json recorded its physics were all trained on the first revision.
-LEGACY_PHYSICS_REVISION = 1
-
-
-class PhysicsMismatchWarning(UserWarning):
-    """A model or run was trained on another revision of the simulated physics than this one."""
-
-
-def physics_record() -> dict[str, Any]:
-    """The physics this installation simulates, as a run's ``config.json`` records it.
-
-    ``revision`` is :data:`foosball_gym.table.PHYSICS_REVISION`, the one that decides whether
-    a model meets the physics it was trained on; the package and PyBullet versions are there
-    to trace a difference the revision does not explain.
-    """
-    try:
-        pybullet = metadata.version("pybullet")
-    except metadata.PackageNotFoundError:
-        pybullet = None
-    return {
-        "revision": PHYSICS_REVISION,
-        "package_version": foosball_gym.__version__,
-        "pybullet": pybullet,
-    }
-
-
-def recorded_physics_revision(config: dict[str, Any] | None) -> int:
-    """The physics revision a run's ``config.json`` (as a dict, or None) says it trained on."""
-    physics = (config or {}).get("physics")
-    if isinstance(physics, dict) and physics.get("revision") is not None:
-        return int(physics["revision"])
-    return LEGACY_PHYSICS_REVISION
-
-
-def physics_mismatch(config: dict[str, Any] | None, name: str) -> str | None:
-    """Why ``name``, trained as ``config`` records, may not behave as it did in training; None
-    where it was trained on the current physics."""
-    recorded = recorded_physics_revision(config)
-    if recorded == PHYSICS_REVISION:
-        return None
-    if "physics" in (config or {}):
-        trained = f"{name} was trained on physics revision {recorded}"
-    else:
-        trained = (
-            f"{name} records no physics revision, so it was trained on revision {recorded} "
-            "(the record was introduced after that revision)"
-        )
-    return (
-        f"{trained}, but foosball_gym {foosball_gym.__version__} simulates physics revision "
-        f"{PHYSICS_REVISION}: its results may differ from those it reached in training. "
-        "Retraining it on the current physics is advised."
-    )
-
-
-@dataclass
-class TrainConfig:
-    """Everything a run needs; the defaults are the paper's PPO settings sized for a CPU.
-
-    The paper used 8192 GPU environments with a horizon of 16; here 8 environments in one
-    process with a horizon of 128 give updates of 1024 samples, in minibatches of 256.
-    """
-
-    env_id: str
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
-    algo: str = "ppo"
-    timesteps: int = 500_000
-    n_envs: int = 8
-    seed: int = 0
-    self_play: bool | None = None  # None: on for two-player environments
-    normalize: bool = True  # observations, by running mean and variance
-    normalize_reward: bool = False  # scale rewards by the running spread of returns
-    vec_env: str = "dummy"
-    net_arch: tuple[int, ...] = (256, 128, 64)
-    learning_rate: float = 1e-3
-    gamma: float = 0.99
-    n_steps: int = 128
-    batch_size: int = 256
-    n_epochs: int = 8
-    gae_lambda: float = 0.95
-    clip_range: float = 0.2
-    log_std_init: float = 0.0  # initial log std of PPO's Gaussian actions (SB3's default)
-    lr_schedule: str = "constant"  # or "linear": decay to 0 over the run
-    target_kl: float | None = None  # stop an update's epochs once the policy moved this far
-    # Behaviour-clone the scripted baseline from this many episodes before learning (0: off).
-    pretrain_episodes: int = 0
-    selfplay_window: int = 100
-    selfplay_threshold: float = 0.2
-    selfplay_pool: int = 1
-    eval_freq: int = 10_000
-    eval_episodes: int = 50
-    checkpoint_freq: int = 50_000
-    target_success: float | None = None  # stop once an evaluation reaches this success rate
-    torch_threads: int = 1
-
-    def check(self) -> None:
-        """Raise ValueError with what is allowed for anything out of range."""
-        if self.env_id not in gym.registry:
-            known = ", ".join(foosball_gym.ENV_IDS)
-            raise ValueError(f"unknown environment {self.env_id!r}; registered: {known}")
-        if self.algo not in ALGOS:
-            raise ValueError(f"unknown algorithm {self.algo!r}; allowed: {', '.join(ALGOS)}")
-        if self.vec_env not in VEC_ENVS:
-            raise ValueError(f"unknown vec_env {self.vec_env!r}; allowed: {', '.join(VEC_ENVS)}")
-        for name in (
-            "timesteps",
-            "n_envs",
-            "n_steps",
-            "batch_size",
-            "n_epochs",
-            "eval_freq",
-            "eval_episodes",
-            "checkpoint_freq",
-            "selfplay_window",
-            "selfplay_pool",
-            "torch_threads",
-        ):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
-        if self.lr_schedule not in LR_SCHEDULES:
-            raise ValueError(
-                f"unknown lr_schedule {self.lr_schedule!r}; allowed: {', '.join(LR_SCHEDULES)}"
-            )
-        if self.target_kl is not None and not self.target_kl > 0:
-            raise ValueError(f"target_kl must be positive, got {self.target_kl}")
-        if self.target_success is not None and not 0 < self.target_success <= 1:
-            raise ValueError(f"target_success must lie in (0, 1], got {self.target_success}")
-        env = gym.make(self.env_id, **self.env_kwargs)  # raises on a bad env option
-        two_player = bool(env.unwrapped.layout.opponent)
-        env.close()
-        if self.self_play and not two_player:
-            raise ValueError(f"{self.env_id} has no opponent; self-play needs a two-player task")
-        if self.self_play is None:
-            self.self_play = two_player
-
-    def save(self, path: Path) -> None:
-        """Write the configuration with the record of the physics it is about to train on.
-
-        The record is not a field: it describes the physics of this installation, not a choice,
-        so a configuration loaded from an older run and saved for a new one gets the current
-        record. :meth:`load` ignores it.
-        """
-        data = {**asdict(self), "physics": physics_record()}
-        _atomic_write_text(path, json.dumps(data, indent=2))
-
-    @classmethod
-    def load(cls, path: Path) -> TrainConfig:
-        data = json.loads(Path(path).read_text())
-        names = {f.name for f in fields(cls)}
-        config = cls(**{k: v for k, v in data.items() if k in names})
-        config.net_arch = tuple(config.net_arch)
-        return config
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+ALGOS = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
+VEC_ENVS = dict(zip(VEC_ENV_KINDS, (DummyVecEnv, SubprocVecEnv), strict=True))
 
 
 def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
@@ -334,7 +175,7 @@ class EvalCurveCallback(BaseCallback):
             self.best = res.success_rate
             self.best_dir.mkdir(exist_ok=True)
             save_model(self.model, self.best_dir / MODEL_FILE, self.best_dir / NORM_FILE)
-            _atomic_write_text(self.best_dir / "best.json", json.dumps(row))
+            atomic_write_text(self.best_dir / "best.json", json.dumps(row))
         target = self.config.target_success
         if target is not None and res.success_rate >= target:
             self.reached = row
@@ -401,7 +242,7 @@ class CheckpointCallback(BaseCallback):
         pointer = {"model": f"{name}.zip", "timesteps": int(self.num_timesteps)}
         if self.model.get_vec_normalize_env() is not None:
             pointer["vecnormalize"] = f"{name}_{NORM_FILE}"
-        _atomic_write_text(self.dir / "latest.json", json.dumps(pointer))
+        atomic_write_text(self.dir / "latest.json", json.dumps(pointer))
 
 
 def save_model(model: Any, path: Path, norm_path: Path) -> None:
@@ -485,7 +326,7 @@ def train(
                 "scripted_success_rate": demos.success_rate,
                 **fit,
             }
-            _atomic_write_text(out / "pretrain.json", json.dumps(record, indent=2))
+            atomic_write_text(out / "pretrain.json", json.dumps(record, indent=2))
 
     if config.pretrain_episodes and isinstance(venv, VecNormalize):
         # The clone was fitted to observations scaled by the demonstrations' statistics; left

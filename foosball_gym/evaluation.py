@@ -1,4 +1,9 @@
-"""Seeded evaluation of a policy: success rate with a confidence interval, goals, rewards."""
+"""Seeded evaluation of a policy: success rate with a confidence interval, goals, rewards.
+
+Needs neither PyTorch nor Stable-Baselines3: a policy is any callable from an observation to
+an action, so the scripted baselines are evaluated on the base install. Recording a video
+needs OpenCV, from the ``train`` or the ``hardware`` extra.
+"""
 
 from __future__ import annotations
 
@@ -12,6 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 import foosball_gym  # noqa: F401  (registers the ids)
+from foosball_gym.catalog import check_env_id
 
 Policy = Callable[[np.ndarray], Any]
 
@@ -86,9 +92,14 @@ def evaluate(
         env_id, env_kwargs: the environment.
         opponent: for two-player envs, the away side's policy (None: the env's default).
         video: write the first episode, rendered, to this .mp4 file.
+
+    Raises:
+        ValueError: ``episodes`` is below 1, ``env_id`` is not registered, or an option has a
+            bad value (TypeError where the environment has no such option).
     """
     if episodes < 1:
         raise ValueError(f"episodes must be at least 1, got {episodes}")
+    check_env_id(env_id)
     kwargs = dict(env_kwargs or {})
     if video is not None:
         kwargs.update(render_mode="rgb_array", render_width=640, render_height=360)
@@ -157,7 +168,8 @@ class _VideoWriter:
             import cv2
         except ImportError as err:
             raise ImportError(
-                'recording video needs OpenCV: pip install "foosball_gym[train]"'
+                "recording video needs OpenCV, which the train and hardware extras install: "
+                'pip install "foosball_gym[train]"'
             ) from err
         self._cv2 = cv2
         self.path = str(path)

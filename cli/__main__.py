@@ -1,0 +1,7 @@
+"""``python -m foosball_gym.cli``: the ``foosball`` command without its console script."""
+
+import sys
+
+from foosball_gym.cli import main
+
+sys.exit(main())

@@ -1,0 +1,91 @@
+"""``foosball calibrate``: calibrate a table's camera and save it to the table configuration."""
+
+from __future__ import annotations
+
+import argparse
+import glob
+from typing import Any
+
+from foosball_gym.cli.common import CliError, LibraryDefault, given, grid, show_size
+
+CALIBRATE_TABLE = "foosball_gym.play.stack:calibrate_table"
+
+
+def add_parser(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "calibrate",
+        help="calibrate a table's camera",
+        description="Solve the camera's pose from the field's corners (and "
+        "its intrinsics from chessboard views) and save it to the table "
+        "configuration.",
+    )
+    p.add_argument("--table", required=True, metavar="CONFIG.yaml")
+    p.add_argument("--frame", help="an image of the field (default: a frame from the camera)")
+    p.add_argument("--chessboard", metavar="GLOB", help="chessboard images for the intrinsics")
+    p.add_argument(
+        "--pattern",
+        type=grid,
+        default=LibraryDefault(CALIBRATE_TABLE, "pattern", show_size),
+        help="inner corners of the chessboard (%(default)s)",
+    )
+    p.add_argument(
+        "--square",
+        type=float,
+        default=LibraryDefault(CALIBRATE_TABLE, "square"),
+        help="chessboard square side, m (%(default)s)",
+    )
+    p.add_argument(
+        "--home-side",
+        choices=["left", "right"],
+        default=LibraryDefault(CALIBRATE_TABLE, "home_side"),
+        help="where the home goal is in the image (%(default)s)",
+    )
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        import cv2
+
+        from foosball_gym.play.stack import calibrate_table
+    except ImportError as err:
+        raise CliError(
+            f'{err}; install the hardware extra: pip install "foosball_gym[hardware]"'
+        ) from None
+    from foosball_gym.hardware.config import ConfigError, load_config, save_config
+    from foosball_gym.vision import OpenCVSource
+
+    try:
+        config = load_config(args.table)
+    except (ConfigError, OSError) as err:
+        raise CliError(str(err)) from None
+    if args.frame:
+        frame = cv2.imread(args.frame)
+        if frame is None:
+            raise CliError(f"cannot read an image from {args.frame}")
+    else:
+        camera = config.camera
+        try:
+            source = OpenCVSource(
+                camera.get("source", 0), camera.get("width"), camera.get("height")
+            )
+        except OSError as err:
+            raise CliError(str(err)) from None
+        got = source.read()
+        source.close()
+        if got is None:
+            raise CliError("the camera gave no frame")
+        frame = got[1]
+    chessboard = None
+    if args.chessboard:
+        chessboard = [cv2.imread(p) for p in sorted(glob.glob(args.chessboard))]
+        chessboard = [img for img in chessboard if img is not None]
+    try:
+        summary = calibrate_table(
+            config, frame, chessboard, **given(args, "pattern", "square", "home_side")
+        )
+    except ValueError as err:
+        raise CliError(str(err)) from None
+    save_config(config, args.table)
+    print(f"camera calibrated: {summary}; saved to {args.table}")
+    return 0

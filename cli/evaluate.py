@@ -1,0 +1,97 @@
+"""``foosball eval``: evaluate a trained model, or a scripted baseline, on seeded episodes.
+
+Scripts read two of the lines it prints, ``success rate N % (95 % CI a - b %)`` and
+``goals for / against X / Y``: :meth:`~foosball_gym.evaluation.EvalResult.table` writes them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import json
+from pathlib import Path
+from typing import Any
+
+from foosball_gym.cli.common import (
+    CliError,
+    add_env_arguments,
+    load_model,
+    parse_env_kwargs,
+    positive_int,
+    scripted,
+)
+from foosball_gym.evaluation import evaluate
+
+
+def add_parser(subparsers: Any) -> None:
+    defaults = inspect.signature(evaluate).parameters
+    p = subparsers.add_parser(
+        "eval",
+        help="evaluate a policy on seeded episodes",
+        description="Evaluate a trained model (a run dir, a .zip or builtin:NAME)"
+        " or, with --policy scripted, the scripted baseline of ENV_ID.",
+    )
+    p.add_argument("target", help="MODEL, or ENV_ID with --policy scripted")
+    p.add_argument(
+        "--policy",
+        choices=["scripted"],
+        help="evaluate the scripted baseline of the environment TARGET",
+    )
+    add_env_arguments(p)
+    p.add_argument(
+        "--episodes",
+        type=positive_int,
+        default=defaults["episodes"].default,
+        help="seeded episodes (%(default)s)",
+    )
+    p.add_argument(
+        "--seed", type=int, default=defaults["seed"].default, help="first episode's seed"
+    )
+    p.add_argument(
+        "--opponent",
+        metavar="scripted|MODEL",
+        help="the away side in two-player tasks (default: scripted)",
+    )
+    p.add_argument("--json", default="eval.json", help="write the results here (%(default)s)")
+    p.add_argument("--video", metavar="FILE.mp4", help="record the first episode")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    env_kwargs = parse_env_kwargs(args.env_kwarg)
+    if args.policy == "scripted":
+        env_id = args.target
+        policy, name = scripted(env_id, env_kwargs), "scripted"
+    else:
+        loaded = load_model(args.target)
+        env_id = args.env or loaded.env_id
+        if env_id is None:
+            raise CliError(
+                f"{args.target} has no config.json naming its environment; give --env ENV_ID"
+            )
+        env_kwargs = {**loaded.env_kwargs, **env_kwargs}
+        policy, name = loaded.policy, loaded.source
+    opponent, opponent_name = None, None
+    if args.opponent:
+        if args.opponent == "scripted":
+            opponent_name = "scripted"
+        else:
+            opponent, opponent_name = load_model(args.opponent).policy, args.opponent
+    try:
+        result = evaluate(
+            policy,
+            env_id,
+            env_kwargs,
+            episodes=args.episodes,
+            seed=args.seed,
+            opponent=opponent,
+            policy_name=name,
+            opponent_name=opponent_name,
+            video=args.video,
+        )
+    except (ValueError, TypeError) as err:
+        raise CliError(str(err)) from None
+    print(result.table())
+    Path(args.json).write_text(json.dumps(result.to_dict(), indent=2))
+    print(f"wrote {args.json}" + (f" and {args.video}" if args.video else ""))
+    return 0

@@ -1,0 +1,142 @@
+"""``foosball play``: run a policy on a real table over CAN, or on the simulated one."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from foosball_gym.cli.common import (
+    CliError,
+    LibraryDefault,
+    add_env_arguments,
+    given,
+    load_model,
+    parse_env_kwargs,
+    positive_int,
+    scripted,
+    show_size,
+    size,
+)
+
+PLAY_SIM = "foosball_gym.play.stack:play_sim"
+
+
+def add_parser(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "play",
+        help="play a policy on a real table over CAN, or a simulated one",
+        description="Run a policy on a table: camera, ball detector, Kalman "
+        "filter, policy, safety layer, CANopen drives. --table sim runs the "
+        "same stack against a simulated table on a virtual CAN bus.",
+    )
+    p.add_argument("model", help="a run dir, a model .zip, builtin:NAME, or 'scripted'")
+    p.add_argument(
+        "--table",
+        required=True,
+        metavar="CONFIG.yaml|sim",
+        help="the table configuration, or 'sim' for the simulated table",
+    )
+    add_env_arguments(p)
+    p.add_argument(
+        "--episodes",
+        type=positive_int,
+        default=20,
+        help="served balls on the simulated table (%(default)s)",
+    )
+    p.add_argument(
+        "--duration", type=float, help="seconds to play on a real table (default: until Ctrl-C)"
+    )
+    p.add_argument(
+        "--latency",
+        type=float,
+        help="how far ahead the filter predicts, s "
+        "(default: the table's estimation.latency_s, else 0.03)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=LibraryDefault(PLAY_SIM, "seed"),
+        help="seed of the simulated table's serves",
+    )
+    p.add_argument(
+        "--camera",
+        dest="camera_size",
+        type=size,
+        default=LibraryDefault(PLAY_SIM, "camera_size", show_size),
+        metavar="WxH",
+        help="the simulated camera's resolution (%(default)s)",
+    )
+    p.add_argument("--log", metavar="FILE.jsonl", help="log every loop to this file")
+    p.add_argument("--no-status", action="store_true", help="no live status line")
+    p.set_defaults(func=run)
+
+
+def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
+    """The policy to play, with the environment it was trained on."""
+    env_kwargs = parse_env_kwargs(args.env_kwarg)
+    if args.model == "scripted":
+        if not args.env:
+            raise CliError("the scripted policy needs --env ENV_ID")
+        return scripted(args.env, env_kwargs), args.env, env_kwargs
+    loaded = load_model(args.model)
+    env_id = args.env or loaded.env_id
+    if env_id is None:
+        raise CliError(f"{args.model} does not say its environment; give --env ENV_ID")
+    return loaded.policy, env_id, {**loaded.env_kwargs, **env_kwargs}
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        from foosball_gym.play.stack import play_real, play_sim
+    except ImportError as err:
+        raise CliError(
+            f'{err}; install the hardware extra: pip install "foosball_gym[hardware]"'
+        ) from None
+    from foosball_gym.envs.interface import task_interface
+    from foosball_gym.hardware.config import ConfigError, load_config
+    from foosball_gym.hardware.safety import SafetyError
+
+    policy, env_id, env_kwargs = _policy(args)
+    try:
+        if args.table == "sim":
+            report = play_sim(
+                policy,
+                env_id,
+                env_kwargs,
+                episodes=args.episodes,
+                log_path=args.log,
+                latency_s=args.latency,
+                status=not args.no_status,
+                **given(args, "seed", "camera_size"),
+            )
+        else:
+            config = load_config(args.table)
+            report = play_real(
+                policy,
+                task_interface(env_id, env_kwargs),
+                config,
+                duration_s=args.duration,
+                log_path=args.log,
+                latency_s=args.latency,
+                status=not args.no_status,
+            )
+    except (ConfigError, ValueError, OSError) as err:
+        raise CliError(str(err)) from None
+    except SafetyError as err:
+        print(f"\nstopped: {err}", file=sys.stderr)
+        return 1
+    print()
+    if report.episodes:
+        print(
+            f"{report.episodes} episodes of {env_id}: success {100 * report.success_rate:.1f} %"
+            f", goals for {report.goals_for}, against {report.goals_against}"
+        )
+    if report.ball_error_mm:
+        errors = report.ball_error_mm
+        print(
+            f"ball detection error: mean {sum(errors) / len(errors):.1f} mm, "
+            f"max {max(errors):.1f} mm"
+        )
+    print(report.timing_table())
+    return 0

@@ -1,0 +1,147 @@
+"""``foosball train``: train a policy on a registered environment, or resume a run.
+
+The options that set a :class:`~foosball_gym.training.config.TrainConfig` field take their
+help and the default they show from the field, and an option left out is not passed on, so
+the default is written down once, in the library.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import fields
+from pathlib import Path
+from typing import Any
+
+from foosball_gym.cli.common import CliError, parse_env_kwargs, positive_int
+from foosball_gym.training.config import ALGORITHMS, LR_SCHEDULES, VEC_ENV_KINDS, TrainConfig
+from foosball_gym.training.files import CONFIG_FILE
+
+# The TrainConfig fields offered as options (n_envs as --n-envs), with how the command line
+# spells their values.
+OPTIONS: dict[str, dict[str, Any]] = {
+    "algo": {"choices": ALGORITHMS},
+    "timesteps": {"type": positive_int},
+    "n_envs": {"type": positive_int},
+    "seed": {"type": int},
+    "vec_env": {"choices": VEC_ENV_KINDS},
+    "n_steps": {"type": positive_int},
+    "batch_size": {"type": positive_int},
+    "learning_rate": {"type": float},
+    "lr_schedule": {"choices": LR_SCHEDULES},
+    "pretrain_episodes": {"type": int, "metavar": "N"},
+    "target_kl": {"type": float},
+    "log_std_init": {"type": float},
+    "eval_freq": {"type": positive_int},
+    "eval_episodes": {"type": positive_int},
+    "checkpoint_freq": {"type": positive_int},
+    "selfplay_window": {"type": positive_int},
+    "selfplay_threshold": {"type": float},
+    "selfplay_pool": {"type": positive_int},
+    "target_success": {"type": float},
+}
+# The boolean fields, set by switches.
+SWITCHED = ("self_play", "normalize", "normalize_reward")
+
+
+def add_parser(subparsers: Any) -> None:
+    fields_by_name = {f.name: f for f in fields(TrainConfig)}
+    p = subparsers.add_parser(
+        "train",
+        help="train a policy (PPO or SAC, self-play for two players)",
+        description="Train a policy on a registered environment.",
+    )
+    p.add_argument("env_id", nargs="?", help=fields_by_name["env_id"].metadata["help"])
+    p.add_argument(
+        "--env-kwarg",
+        action="append",
+        metavar="KEY=VALUE",
+        help="an environment option (repeatable), e.g. ball_start=incoming",
+    )
+    p.add_argument("--out", metavar="DIR", help="run directory (default runs/ENV-seedN)")
+    p.add_argument(
+        "--resume", metavar="DIR", help="continue the run in DIR from its last checkpoint"
+    )
+    for name, spelling in OPTIONS.items():
+        f = fields_by_name[name]
+        doc = f.metadata["help"].replace("%", "%%")
+        p.add_argument(
+            f"--{name.replace('_', '-')}",
+            help=f"{doc} ({_shown(f.default)})",
+            **spelling,
+        )
+    sp = p.add_mutually_exclusive_group()
+    sp.add_argument(
+        "--self-play",
+        dest="self_play",
+        action="store_true",
+        default=None,
+        help="play frozen copies of the learner (default for two-player tasks)",
+    )
+    sp.add_argument(
+        "--no-self-play",
+        dest="self_play",
+        action="store_false",
+        help="play the environment's scripted opponent instead",
+    )
+    p.add_argument(
+        "--no-normalize",
+        dest="normalize",
+        action="store_false",
+        default=None,
+        help="do not normalise observations",
+    )
+    p.add_argument(
+        "--normalize-reward",
+        action="store_true",
+        default=None,
+        help=fields_by_name["normalize_reward"].metadata["help"],
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _shown(default: Any) -> str:
+    if default is None:
+        return "off"
+    if isinstance(default, float):
+        return f"{default:g}"
+    return str(default)
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    """The configuration the options ask for; the fields they leave out keep their default."""
+    chosen = {
+        name: getattr(args, name)
+        for name in (*OPTIONS, *SWITCHED)
+        if getattr(args, name) is not None
+    }
+    return TrainConfig(env_id=args.env_id, env_kwargs=parse_env_kwargs(args.env_kwarg), **chosen)
+
+
+def run(args: argparse.Namespace) -> int:
+    from foosball_gym.training import require_train_extra
+
+    require_train_extra()
+    from foosball_gym.training.run import train
+
+    if args.resume:
+        out = Path(args.resume)
+        if not (out / CONFIG_FILE).exists():
+            raise CliError(f"--resume {out}: no run there ({CONFIG_FILE} is missing)")
+        config = TrainConfig.load(out / CONFIG_FILE)
+    else:
+        if not args.env_id:
+            raise CliError("give an environment id (see `foosball envs`) or --resume DIR")
+        config = config_from_args(args)
+        out = Path(args.out or f"runs/{config.env_id}-seed{config.seed}")
+    try:
+        result = train(config, out, progress_bar=not args.no_progress, resume=bool(args.resume))
+    except (ValueError, TypeError) as err:
+        raise CliError(str(err)) from None
+    print(f"trained {result.timesteps} steps in {result.seconds:.0f} s; run in {result.out}")
+    if result.reached:
+        print(
+            f"reached the target success rate at {int(result.reached['timesteps'])} steps, "
+            f"{result.reached['wall_seconds']:.0f} s"
+        )
+    return 0

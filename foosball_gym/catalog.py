@@ -1,0 +1,63 @@
+"""The registered environments: their ids checked, their options listed, their scripted
+baselines built. What ``foosball envs`` prints and what eval and play fall back on."""
+
+from __future__ import annotations
+
+import inspect
+from typing import Any
+
+import gymnasium as gym
+
+import foosball_gym
+
+
+def check_env_id(env_id: str) -> None:
+    """Raise ValueError naming the registered ids where ``env_id`` is not one of them."""
+    if env_id not in gym.registry:
+        known = ", ".join(foosball_gym.ENV_IDS)
+        raise ValueError(f"unknown environment {env_id!r}; registered: {known}")
+
+
+def scripted_policy(env_id: str, env_kwargs: dict[str, Any] | None = None) -> Any:
+    """The scripted baseline of the environment ``env_id`` with options ``env_kwargs``.
+
+    Raises:
+        ValueError: ``env_id`` is not registered, or an option has a bad value.
+        TypeError: the environment has no option of that name.
+    """
+    check_env_id(env_id)
+    env = gym.make(env_id, **(env_kwargs or {}))
+    try:
+        return env.unwrapped.scripted_policy()
+    finally:
+        env.close()
+
+
+def describe_envs() -> str:
+    """Every registered environment with its spaces and its options' defaults and values."""
+    from foosball_gym.envs.base import FoosballEnv
+
+    lines = []
+    base_params = inspect.signature(FoosballEnv.__init__).parameters
+    for env_id in foosball_gym.ENV_IDS:
+        spec = gym.spec(env_id)
+        env = gym.make(env_id)
+        cls = type(env.unwrapped)
+        lines.append(
+            f"{env_id}  ({spec.max_episode_steps} steps, action {env.action_space.shape}"
+            f", observation {env.observation_space.shape})"
+        )
+        first = (cls.__doc__ or "").strip().splitlines()[0]
+        lines.append(f"    {first}")
+        params = {**base_params, **inspect.signature(cls.__init__).parameters}
+        for name, p in params.items():
+            if name in ("self", "layout", "extras", "kwargs") or p.default is inspect._empty:
+                continue
+            if name.startswith("opponent") and not env.unwrapped.layout.opponent:
+                continue
+            values = cls.option_grid().get(name)
+            allowed = f"  one of {', '.join(map(repr, values))}" if values else ""
+            lines.append(f"    {name} = {p.default!r}{allowed}")
+        env.close()
+        lines.append("")
+    return "\n".join(lines)

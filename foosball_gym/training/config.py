@@ -1,0 +1,190 @@
+"""A training run's configuration, and the record of the physics a run was trained on.
+
+Needs neither PyTorch nor Stable-Baselines3: ``foosball train`` builds its options (their
+defaults and help) from :class:`TrainConfig`'s fields, and a run's ``config.json`` is read,
+without them.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field, fields
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+
+import foosball_gym
+from foosball_gym.catalog import check_env_id
+from foosball_gym.table import PHYSICS_REVISION
+from foosball_gym.training.files import atomic_write_text
+
+ALGORITHMS = ("ppo", "sac")
+VEC_ENV_KINDS = ("dummy", "subproc")
+LR_SCHEDULES = ("constant", "linear")
+# Runs from before config.json recorded its physics were all trained on the first revision.
+LEGACY_PHYSICS_REVISION = 1
+
+
+class PhysicsMismatchWarning(UserWarning):
+    """A model or run was trained on another revision of the simulated physics than this one."""
+
+
+def physics_record() -> dict[str, Any]:
+    """The physics this installation simulates, as a run's ``config.json`` records it.
+
+    ``revision`` is :data:`foosball_gym.table.PHYSICS_REVISION`, the one that decides whether
+    a model meets the physics it was trained on; the package and PyBullet versions are there
+    to trace a difference the revision does not explain.
+    """
+    try:
+        pybullet = metadata.version("pybullet")
+    except metadata.PackageNotFoundError:
+        pybullet = None
+    return {
+        "revision": PHYSICS_REVISION,
+        "package_version": foosball_gym.__version__,
+        "pybullet": pybullet,
+    }
+
+
+def recorded_physics_revision(config: dict[str, Any] | None) -> int:
+    """The physics revision a run's ``config.json`` (as a dict, or None) says it trained on."""
+    physics = (config or {}).get("physics")
+    if isinstance(physics, dict) and physics.get("revision") is not None:
+        return int(physics["revision"])
+    return LEGACY_PHYSICS_REVISION
+
+
+def physics_mismatch(config: dict[str, Any] | None, name: str) -> str | None:
+    """Why ``name``, trained as ``config`` records, may not behave as it did in training; None
+    where it was trained on the current physics."""
+    recorded = recorded_physics_revision(config)
+    if recorded == PHYSICS_REVISION:
+        return None
+    if "physics" in (config or {}):
+        trained = f"{name} was trained on physics revision {recorded}"
+    else:
+        trained = (
+            f"{name} records no physics revision, so it was trained on revision {recorded} "
+            "(the record was introduced after that revision)"
+        )
+    return (
+        f"{trained}, but foosball_gym {foosball_gym.__version__} simulates physics revision "
+        f"{PHYSICS_REVISION}: its results may differ from those it reached in training. "
+        "Retraining it on the current physics is advised."
+    )
+
+
+def _field(default: Any, doc: str) -> Any:
+    """A field with the one line that describes it (``foosball train --help`` shows it)."""
+    return field(default=default, metadata={"help": doc})
+
+
+@dataclass
+class TrainConfig:
+    """Everything a run needs; the defaults are the paper's PPO settings sized for a CPU.
+
+    The paper used 8192 GPU environments with a horizon of 16; here 8 environments in one
+    process with a horizon of 128 give updates of 1024 samples, in minibatches of 256.
+    Each field's metadata ``"help"`` describes it.
+    """
+
+    env_id: str = field(metadata={"help": "environment id, e.g. Foosball-Block-v0"})
+    env_kwargs: dict[str, Any] = field(
+        default_factory=dict, metadata={"help": "the environment's options"}
+    )
+    algo: str = _field("ppo", "the learning algorithm")
+    timesteps: int = _field(500_000, "environment steps to train for")
+    n_envs: int = _field(8, "environments stepped side by side")
+    seed: int = _field(0, "seed of the environments and the model")
+    self_play: bool | None = _field(
+        None, "play frozen copies of the learner (None: on for two-player tasks)"
+    )
+    normalize: bool = _field(True, "normalise observations by their running mean and variance")
+    normalize_reward: bool = _field(False, "scale rewards by the running spread of returns")
+    vec_env: str = _field("dummy", "dummy: environments in this process; subproc: one process each")
+    net_arch: tuple[int, ...] = _field((256, 128, 64), "hidden layers of the networks")
+    learning_rate: float = _field(1e-3, "learning rate")
+    gamma: float = _field(0.99, "discount factor")
+    n_steps: int = _field(128, "PPO horizon per environment")
+    batch_size: int = _field(256, "minibatch size")
+    n_epochs: int = _field(8, "PPO's passes over each rollout")
+    gae_lambda: float = _field(0.95, "PPO's GAE lambda")
+    clip_range: float = _field(0.2, "PPO's clip range")
+    # SB3's own default.
+    log_std_init: float = _field(0.0, "PPO's initial log standard deviation of actions")
+    lr_schedule: str = _field("constant", "constant, or linear decay to 0 over the run")
+    target_kl: float | None = _field(None, "end an update's epochs once the policy moved this far")
+    pretrain_episodes: int = _field(
+        0, "episodes of the scripted baseline to behaviour-clone before learning"
+    )
+    selfplay_window: int = _field(100, "games the net score is taken over")
+    selfplay_threshold: float = _field(0.2, "net score above which the opponent is replaced")
+    selfplay_pool: int = _field(1, "draw opponents from this many latest snapshots")
+    eval_freq: int = _field(10_000, "evaluate every this many steps")
+    eval_episodes: int = _field(50, "seeded episodes per evaluation")
+    checkpoint_freq: int = _field(50_000, "write a checkpoint every this many steps")
+    target_success: float | None = _field(
+        None, "stop once an evaluation reaches this success rate, 0-1"
+    )
+    torch_threads: int = _field(1, "PyTorch's threads")
+
+    def check(self) -> None:
+        """Raise ValueError with what is allowed for anything out of range."""
+        check_env_id(self.env_id)
+        if self.algo not in ALGORITHMS:
+            raise ValueError(f"unknown algorithm {self.algo!r}; allowed: {', '.join(ALGORITHMS)}")
+        if self.vec_env not in VEC_ENV_KINDS:
+            raise ValueError(
+                f"unknown vec_env {self.vec_env!r}; allowed: {', '.join(VEC_ENV_KINDS)}"
+            )
+        for name in (
+            "timesteps",
+            "n_envs",
+            "n_steps",
+            "batch_size",
+            "n_epochs",
+            "eval_freq",
+            "eval_episodes",
+            "checkpoint_freq",
+            "selfplay_window",
+            "selfplay_pool",
+            "torch_threads",
+        ):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise ValueError(
+                f"unknown lr_schedule {self.lr_schedule!r}; allowed: {', '.join(LR_SCHEDULES)}"
+            )
+        if self.target_kl is not None and not self.target_kl > 0:
+            raise ValueError(f"target_kl must be positive, got {self.target_kl}")
+        if self.target_success is not None and not 0 < self.target_success <= 1:
+            raise ValueError(f"target_success must lie in (0, 1], got {self.target_success}")
+        env = gym.make(self.env_id, **self.env_kwargs)  # raises on a bad env option
+        two_player = bool(env.unwrapped.layout.opponent)
+        env.close()
+        if self.self_play and not two_player:
+            raise ValueError(f"{self.env_id} has no opponent; self-play needs a two-player task")
+        if self.self_play is None:
+            self.self_play = two_player
+
+    def save(self, path: Path) -> None:
+        """Write the configuration with the record of the physics it is about to train on.
+
+        The record is not a field: it describes the physics of this installation, not a choice,
+        so a configuration loaded from an older run and saved for a new one gets the current
+        record. :meth:`load` ignores it.
+        """
+        data = {**asdict(self), "physics": physics_record()}
+        atomic_write_text(path, json.dumps(data, indent=2))
+
+    @classmethod
+    def load(cls, path: Path) -> TrainConfig:
+        data = json.loads(Path(path).read_text())
+        names = {f.name for f in fields(cls)}
+        config = cls(**{k: v for k, v in data.items() if k in names})
+        config.net_arch = tuple(config.net_arch)
+        return config
