@@ -93,9 +93,9 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(
             f'{err}; install the hardware extra: pip install "foosball_gym[hardware]"'
         ) from None
-    from foosball_gym.envs.interface import task_interface
     from foosball_gym.hardware.config import ConfigError, load_config
     from foosball_gym.hardware.safety import SafetyError
+    from foosball_gym.interface.task import task_interface
 
     policy, env_id, env_kwargs = _policy(args)
     try:

@@ -227,12 +227,14 @@ def tunnelling(sim: TableSim, speed: float, target: str) -> dict:
     return result
 
 
-def unfold(y: float, walls: list[int], factor: float = 0.5) -> float:
+def unfold(y: float, walls: list[int], factor: float = 1.0) -> float:
     """A ball's y with its side-wall bounces undone, as if the walls were not there.
 
-    Each bounce is assumed to keep ``factor`` of the sideways speed and none of it is lost
-    otherwise, so between walls the unfolded coordinate moves ``1 / factor**k`` times as far as
-    the ball after k bounces. With W = 0.34 - R and one bounce off +W: W + (W - y) / factor.
+    By default the walls are mirrors: the unfolded coordinate moves exactly as far as the ball
+    does, so a step in it is a step of the real crossing point, however many bounces came
+    before. With ``factor`` < 1 each bounce is taken to keep that share of the sideways speed,
+    and the unfolded coordinate moves ``1 / factor**k`` times as far as the ball after k
+    bounces. With W = 0.34 - R and one bounce off +W: W + (W - y) / factor.
 
     Args:
         y: where the ball is now.

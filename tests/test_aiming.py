@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from foosball_gym import table as T
-from foosball_gym.envs.interface import task_interface
 from foosball_gym.evaluation import evaluate
+from foosball_gym.interface.task import task_interface
 from foosball_gym.policies.aiming import (
     MAX_ANGLE,
     clearance,

@@ -226,8 +226,8 @@ def test_calibrate_finds_the_intrinsics_from_chessboards_and_the_pose_from_the_f
 ):
     import cv2
 
-    from foosball_gym.envs.interface import task_interface
     from foosball_gym.hardware.config import load_config, save_config, shipped_table
+    from foosball_gym.interface.task import task_interface
     from foosball_gym.sim_table.table import SimTable, sim_table_config
     from foosball_gym.vision import CameraCalibration
 

@@ -158,3 +158,22 @@ def test_the_drives_never_outrun_the_speed_the_near_contact_test_assumes():
     finally:
         table.close()
     assert worst <= 1.0 + 1e-6
+
+
+def test_scripted_full_games_keep_the_ball_on_the_table():
+    # What is left: a ball hopping off the surface and struck in the air by a swinging foot.
+    # 3 of 100 scripted games on this physics, 22 of 100 before (README, the simulated table).
+    env = gym.make("Foosball-FullGame-v0")
+    policy = env.unwrapped.scripted_policy()
+    outs = 0
+    try:
+        for seed in range(10):
+            obs, _ = env.reset(seed=seed)
+            done = False
+            while not done:
+                obs, _, terminated, truncated, info = env.step(policy(obs))
+                done = terminated or truncated
+            outs += info["out_of_table"]
+    finally:
+        env.close()
+    assert outs == 0  # with 0.05 friction on the figurines, seed 0 lost its ball

@@ -11,8 +11,8 @@ import pytest
 pytest.importorskip("canopen")
 
 from foosball_gym.cli import main  # noqa: E402
-from foosball_gym.envs.interface import task_interface  # noqa: E402
 from foosball_gym.hardware.config import load_config, save_config, shipped_table  # noqa: E402
+from foosball_gym.interface.task import task_interface  # noqa: E402
 from foosball_gym.play.session import read_session, replay  # noqa: E402
 from foosball_gym.play.stack import build_perception, play_sim  # noqa: E402
 from foosball_gym.sim_table.table import SimTable, sim_table_config  # noqa: E402

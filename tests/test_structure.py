@@ -46,7 +46,7 @@ def test_importing_the_package_needs_no_torch_and_registers_the_ids():
 
 def test_a_tasks_interface_is_built_without_the_simulator():
     code = (
-        "import sys; from foosball_gym.envs.interface import task_interface;"
+        "import sys; from foosball_gym.interface.task import task_interface;"
         "i = task_interface('Foosball-KeeperVsKeeper-v0');"
         "assert 'pybullet' not in sys.modules, 'pybullet was imported';"
         "print(len(i.builder.names))"
@@ -61,7 +61,7 @@ def test_the_interface_is_the_environments_own():
     import numpy as np
 
     from foosball_gym import ENV_IDS
-    from foosball_gym.envs.interface import task_interface
+    from foosball_gym.interface.task import task_interface
 
     for env_id in ENV_IDS:
         for kwargs in ({}, {"joint_velocities": False}):
@@ -191,6 +191,50 @@ def test_no_module_imports_itself_back_through_others():
     )
     cycle = find_cycle(import_graph(modules))
     assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+# Layers, lowest first: a module may import its own layer and those below, never one above.
+# The real table (interface, estimation, vision, hardware, play) never reaches the simulator
+# or the environments, whatever the training side does.
+BELOW = {
+    "foosball_gym.interface": {
+        "foosball_gym.envs",
+        "foosball_gym.simulator",
+        "foosball_gym.sim_table",
+    },
+    "foosball_gym.estimation": {
+        "foosball_gym.envs",
+        "foosball_gym.simulator",
+        "foosball_gym.training",
+    },
+    "foosball_gym.vision": {"foosball_gym.envs", "foosball_gym.simulator", "foosball_gym.training"},
+    "foosball_gym.hardware": {
+        "foosball_gym.envs",
+        "foosball_gym.simulator",
+        "foosball_gym.training",
+    },
+    "foosball_gym.play": {"foosball_gym.envs", "foosball_gym.simulator", "foosball_gym.training"},
+    "foosball_gym.policies": {
+        "foosball_gym.envs",
+        "foosball_gym.simulator",
+        "foosball_gym.training",
+    },
+}
+
+
+def test_no_module_imports_a_layer_above_its_own():
+    graph = import_graph(module_files(SOURCES))
+    # The check sees the state estimator reach the observation builder, from below.
+    assert "foosball_gym.interface.observations" in graph["foosball_gym.estimation.state"]
+    wrong = [
+        f"{module} imports {target}"
+        for module, targets in graph.items()
+        for package, above in BELOW.items()
+        if module == package or module.startswith(package + ".")
+        for target in targets
+        if any(target == a or target.startswith(a + ".") for a in above)
+    ]
+    assert wrong == []
 
 
 def test_the_cycle_check_finds_a_cycle_closed_inside_a_function(tmp_path):

@@ -21,14 +21,14 @@ from gymnasium import spaces
 from foosball_gym import table as T
 from foosball_gym.envs.common import check_range
 from foosball_gym.envs.estimated import CameraNoise, EstimatedState
-from foosball_gym.envs.interface import Layout, TaskInterface
-from foosball_gym.envs.observations import (
+from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
+from foosball_gym.interface.observations import (
     JOINT_SETS,
     ObservationBuilder,
     ObservationOptions,
     mirrored_builder,
 )
-from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
+from foosball_gym.interface.task import Layout, TaskInterface
 from foosball_gym.physics_options import check_physics
 from foosball_gym.policies.scripted import ScriptedTeam
 

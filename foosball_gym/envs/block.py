@@ -12,7 +12,7 @@ from foosball_gym.envs.common import (
     random_shot_start,
     shot_at_goal,
 )
-from foosball_gym.envs.interface import Layout
+from foosball_gym.interface.task import Layout
 
 
 class BlockEnv(FoosballEnv):
@@ -67,7 +67,7 @@ class BlockEnv(FoosballEnv):
     - v0: first version.
     - v0, physics revision 2 (ids kept: the package is unreleased): contacts keep their
       restitution at every speed (no ball CCD; fine physics steps near a possible contact),
-      the CAD figurine's slim leg, the authors' materials (ball on figurine 0.05), rolling
+      the CAD figurine's slim leg, the authors' materials (ball on figurine 0.02), rolling
       resistance, a served ball starts sliding; options ``control_hz``, ``contact_travel``,
       ``rolling_resistance`` and ``rolling_resistance_range`` (``substeps`` is gone:
       ``physics_hz`` / ``control_hz``).

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.envs.observations import ObservationBuilder
+from foosball_gym.interface.observations import ObservationBuilder
 
 
 @dataclass(frozen=True)

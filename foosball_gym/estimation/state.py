@@ -7,8 +7,8 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.envs.observations import ObservationBuilder
 from foosball_gym.estimation.kalman import BallFilter, RodFilter
+from foosball_gym.interface.observations import ObservationBuilder
 
 
 class TableStateEstimator:

@@ -19,10 +19,10 @@ import gymnasium as gym
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.envs.interface import TaskInterface
 from foosball_gym.estimation import BallFilter, TableStateEstimator
 from foosball_gym.hardware.config import TableConfig
 from foosball_gym.hardware.drives import TableDrives
+from foosball_gym.interface.task import TaskInterface
 from foosball_gym.play.loop import STAGES, LoopRecord, PlayLoop, StatusLine
 from foosball_gym.play.session import SessionLog
 from foosball_gym.vision import (
@@ -184,7 +184,7 @@ def play_sim(
     camera_size: tuple[int, int] = (640, 360),
 ) -> PlayReport:
     """Play ``episodes`` served balls on the simulated table, through the whole stack."""
-    from foosball_gym.envs.interface import task_interface
+    from foosball_gym.interface.task import task_interface
     from foosball_gym.sim_table.table import SimTable, sim_table_config
 
     interface = task_interface(env_id, env_kwargs)

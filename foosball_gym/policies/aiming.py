@@ -19,8 +19,8 @@ from foosball_gym import table as T
 # Ball-minus-figurine y offset (m) -> shot angle from +x (degrees).
 _OFFSETS = np.arange(0.009, 0.0265, 0.001)
 _ANGLES = np.array(
-    [0.0, 2.6, 5.2, 7.7, 8.4, 11.0, 13.9, 18.6, 21.5, 24.3, 25.7, 30.2, 32.8, 38.6, 40.9, 44.5]
-    + [46.6, 52.1]
+    [0.0, 2.8, 5.6, 8.6, 9.5, 12.5, 15.4, 20.1, 23.1, 25.9, 27.3, 31.8, 34.4, 40.2, 42.6, 46.1]
+    + [48.2, 53.8]
 )
 MAX_ANGLE = math.radians(float(_ANGLES[-1]))
 MIN_ANGLE = math.radians(10.0)

@@ -17,8 +17,8 @@ import numpy as np
 
 from foosball_gym import table as T
 from foosball_gym.camera import CameraModel
-from foosball_gym.envs.interface import TaskInterface
 from foosball_gym.hardware.config import BusConfig, JointConfig, TableConfig
+from foosball_gym.interface.task import TaskInterface
 from foosball_gym.sim_table.drives import SimulatedDrives
 
 # Calibration of the simulated drives: arbitrary but drive-like, and the revolute drive turned

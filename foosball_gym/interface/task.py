@@ -14,7 +14,7 @@ from typing import Any
 import gymnasium as gym
 
 from foosball_gym import table as T
-from foosball_gym.envs.observations import ObservationBuilder, ObservationOptions
+from foosball_gym.interface.observations import ObservationBuilder, ObservationOptions
 
 Joint = tuple[str, str]  # (rod name, "slide" | "spin")
 
