@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # only for the hints: importing the simulator would import py
 
 R = T.BALL_RADIUS
 # Where the ball's centre is when it touches a side wall.
-WALL_Y = T.FIELD_HALF_WIDTH - R
+WALL_Y = T.BALL_LIMIT_Y
 KEEPER = T.rod("home_keeper")
 # What of a figurine the ball meets, from the rod's axis: the front face (towards +x at spin 0)
 # at the height of the ball's centre and the half width along y. The slim leg where the table

@@ -89,6 +89,11 @@ BALL_MAX_SPEED = 15.0
 # 9.81 m/s^2 (besides its linear damping). 0.01 stops a 1 m/s ball within about 5 m on a flat
 # table; a worn ball or a dusty table rolls less far.
 ROLLING_RESISTANCE = 0.01
+# Where the ball's centre can be: against a side wall (y) or an end wall (x); and a ball whose
+# centre is within GOAL_MOUTH_HALF of the middle crosses the goal line inside the mouth.
+BALL_LIMIT_X = FIELD_HALF_LENGTH - BALL_RADIUS
+BALL_LIMIT_Y = FIELD_HALF_WIDTH - BALL_RADIUS
+GOAL_MOUTH_HALF = GOAL_HALF_WIDTH - BALL_RADIUS
 
 
 @dataclass(frozen=True)

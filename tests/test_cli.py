@@ -228,10 +228,12 @@ def test_calibrate_finds_the_intrinsics_from_chessboards_and_the_pose_from_the_f
 
     from foosball_gym.hardware.config import load_config, save_config, shipped_table
     from foosball_gym.interface.task import task_interface
-    from foosball_gym.sim_table.table import SimTable, sim_table_config
+    from foosball_gym.sim_table.simulated_table import SimulatedTable, sim_table_config
     from foosball_gym.vision import CameraCalibration
 
-    table = SimTable("Foosball-Block-v0", {}, sim_table_config(task_interface("Foosball-Block-v0")))
+    table = SimulatedTable(
+        "Foosball-Block-v0", {}, sim_table_config(task_interface("Foosball-Block-v0"))
+    )
     try:
         frame = cv2.cvtColor(table.frame(), cv2.COLOR_RGB2BGR)
         truth = CameraCalibration.from_camera_model(table.camera_model)

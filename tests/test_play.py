@@ -15,7 +15,7 @@ from foosball_gym.hardware.config import load_config, save_config, shipped_table
 from foosball_gym.interface.task import task_interface  # noqa: E402
 from foosball_gym.play.session import read_session, replay  # noqa: E402
 from foosball_gym.play.stack import build_perception, play_sim  # noqa: E402
-from foosball_gym.sim_table.table import SimTable, sim_table_config  # noqa: E402
+from foosball_gym.sim_table.simulated_table import SimulatedTable, sim_table_config  # noqa: E402
 from foosball_gym.vision import CameraCalibration  # noqa: E402
 
 SMALL_CAMERA = (320, 180)
@@ -114,7 +114,7 @@ def test_a_logged_session_replays_to_the_same_decisions(tmp_path):
 
 def test_calibrate_writes_the_camera_pose_into_the_table_configuration(tmp_path, capsys):
     interface = task_interface("Foosball-Block-v0")
-    table = SimTable("Foosball-Block-v0", {}, sim_table_config(interface))
+    table = SimulatedTable("Foosball-Block-v0", {}, sim_table_config(interface))
     try:
         frame = cv2.cvtColor(table.frame(), cv2.COLOR_RGB2BGR)
         truth = CameraCalibration.from_camera_model(table.camera_model)

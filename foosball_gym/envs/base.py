@@ -35,8 +35,6 @@ from foosball_gym.policies.scripted import ScriptedTeam
 Policy = Callable[[np.ndarray], Any]
 
 RENDER_MODES = ("human", "rgb_array")
-_BALL_LIMIT_X = T.FIELD_HALF_LENGTH - T.BALL_RADIUS
-_BALL_LIMIT_Y = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
 # A ball slower than this (m/s) counts as lying still for the stagnation rule.
 STILL_SPEED = 0.05
 
@@ -63,10 +61,10 @@ def check_pair(name: str, value: Any) -> tuple[float, float]:
 
 def check_ball_position(name: str, value: Any) -> tuple[float, float]:
     x, y = check_pair(name, value)
-    if abs(x) > _BALL_LIMIT_X or abs(y) > _BALL_LIMIT_Y:
+    if abs(x) > T.BALL_LIMIT_X or abs(y) > T.BALL_LIMIT_Y:
         raise ValueError(
             f"option {name!r} = ({x}, {y}) is off the field; the ball's centre must lie "
-            f"within |x| <= {_BALL_LIMIT_X:.5f}, |y| <= {_BALL_LIMIT_Y:.5f} m"
+            f"within |x| <= {T.BALL_LIMIT_X:.5f}, |y| <= {T.BALL_LIMIT_Y:.5f} m"
         )
     return x, y
 

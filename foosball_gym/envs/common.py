@@ -9,7 +9,6 @@ import numpy as np
 
 from foosball_gym import table as T
 
-GOAL_MOUTH_HALF = T.GOAL_HALF_WIDTH - T.BALL_RADIUS
 SHOT_SPEED_LIMITS = (1e-3, 2 * T.BALL_MAX_SPEED)
 # The spec's resting ball: 0.497 m from the centre line, +-5 mm, in front of a keeper.
 REST_X, REST_X_JITTER, REST_Y = 0.497, 0.005, 0.1
@@ -40,7 +39,7 @@ def shot_at_goal(
 ) -> tuple[float, float]:
     """Velocity of a shot from ``position`` at a uniform point of ``defender``'s goal mouth."""
     goal_x = -T.GOAL_LINE_X if defender == T.HOME else T.GOAL_LINE_X
-    target_y = float(rng.uniform(-GOAL_MOUTH_HALF, GOAL_MOUTH_HALF))
+    target_y = float(rng.uniform(-T.GOAL_MOUTH_HALF, T.GOAL_MOUTH_HALF))
     speed = float(rng.uniform(*speed_range))
     dx, dy = goal_x - position[0], target_y - position[1]
     norm = math.hypot(dx, dy)

@@ -18,7 +18,6 @@ from foosball_gym import table as T
 
 SHAPING_MODES = ("difference", "potential")
 TERMS = ("goal", "out_of_table", "ball_to_goal", "figurine_to_ball", "action_regularisation")
-_GOAL_MOUTH_HALF = T.GOAL_HALF_WIDTH - T.BALL_RADIUS
 
 
 @dataclass(frozen=True)
@@ -46,7 +45,7 @@ class RewardWeights:
 
 def ball_to_goal_potential(x: float, y: float) -> float:
     """exp(-6 d), d the distance from the ball to the away goal mouth (home attacks +x)."""
-    dy = abs(y) - _GOAL_MOUTH_HALF
+    dy = abs(y) - T.GOAL_MOUTH_HALF
     d = math.hypot(x - T.GOAL_LINE_X, dy if dy > 0 else 0.0)
     return math.exp(-6.0 * d)
 

@@ -15,8 +15,8 @@ from filterpy.kalman import KalmanFilter
 
 from foosball_gym import table as T
 
-_WALL_Y = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
-_WALL_X = T.FIELD_HALF_LENGTH - T.BALL_RADIUS
+_WALL_Y = T.BALL_LIMIT_Y
+_WALL_X = T.BALL_LIMIT_X
 
 
 def bounce(

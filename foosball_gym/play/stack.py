@@ -185,11 +185,11 @@ def play_sim(
 ) -> PlayReport:
     """Play ``episodes`` served balls on the simulated table, through the whole stack."""
     from foosball_gym.interface.task import task_interface
-    from foosball_gym.sim_table.table import SimTable, sim_table_config
+    from foosball_gym.sim_table.simulated_table import SimulatedTable, sim_table_config
 
     interface = task_interface(env_id, env_kwargs)
     config = sim_table_config(interface)
-    table = SimTable(env_id, env_kwargs, config, seed=seed, camera_size=camera_size)
+    table = SimulatedTable(env_id, env_kwargs, config, seed=seed, camera_size=camera_size)
     calibration = CameraCalibration.from_camera_model(table.camera_model)
     config.camera["calibration"] = calibration.to_dict()
     perception = build_perception(config, interface, latency_s)

@@ -30,7 +30,7 @@ ANGLE_ERROR = math.radians(1.0)
 ANGLE_ERROR_SLOPE = 0.1
 CLEAR_ENOUGH = 0.02
 
-_WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
+_WALL = T.BALL_LIMIT_Y
 # A ball whose centre crosses the line within the opening is a goal; one that grazes a post
 # mostly goes in, so the lane only has to keep the centre a little inside.
 _GOAL = T.GOAL_HALF_WIDTH - 0.005

@@ -16,7 +16,7 @@ import numpy as np
 from foosball_gym import table as T
 from foosball_gym.policies.aiming import offset_for_angle, plan_shot
 
-_WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
+_WALL = T.BALL_LIMIT_Y
 # How far in front of a rod (ball centre minus rod x) a swing of the foot reaches the ball.
 _REACH_NEAR = T.FIGURINE_SIZE[0] / 2 + T.BALL_RADIUS - 0.004
 _REACH_FAR = 0.075

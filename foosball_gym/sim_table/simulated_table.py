@@ -3,7 +3,7 @@
 ``foosball play MODEL --table sim`` runs the complete real-table stack against it: the camera
 renders the PyBullet scene, the drives are CiA 402 nodes on python-can's virtual bus, and the
 away side (if the task has one) is played by the task's opponent, as a human would play it.
-Time is simulated: one :meth:`SimTable.step` is one control step, in lockstep with the loop.
+Time is simulated: one :meth:`SimulatedTable.step` is one control step, in lockstep with the loop.
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def sim_table_config(interface: TaskInterface, mode: str = "csp") -> TableConfig
     )
 
 
-class SimTable:
+class SimulatedTable:
     """The simulated table for a task.
 
     Args:
