@@ -52,12 +52,16 @@ def add_parser(subparsers: Any) -> None:
         metavar="scripted|MODEL",
         help="the away side in two-player tasks (default: scripted)",
     )
-    p.add_argument("--json", default="eval.json", help="write the results here (%(default)s)")
+    p.add_argument(
+        "--json", metavar="FILE.json", help="also write the results here (default: nowhere)"
+    )
     p.add_argument("--video", metavar="FILE.mp4", help="record the first episode")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.json is not None:
+        _check_writable(args.json)
     env_kwargs = parse_env_kwargs(args.env_kwarg)
     if args.policy == "scripted":
         env_id = args.target
@@ -92,6 +96,23 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None
     print(result.table())
-    Path(args.json).write_text(json.dumps(result.to_dict(), indent=2))
-    print(f"wrote {args.json}" + (f" and {args.video}" if args.video else ""))
+    written = [path for path in (args.json, args.video) if path]
+    if args.json:
+        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2))
+    if written:
+        print("wrote " + " and ".join(written))
     return 0
+
+
+def _check_writable(path: str) -> None:
+    """Fail before a long evaluation, not after it, where its results cannot be written."""
+    target = Path(path)
+    if target.is_dir():
+        raise CliError(f"--json {path} is a directory; give a file name")
+    if not target.parent.is_dir():
+        raise CliError(f"--json {path}: the folder {target.parent} does not exist")
+    try:
+        with open(target, "a"):
+            pass
+    except OSError as err:
+        raise CliError(f"--json {path} cannot be written: {err.strerror}") from None

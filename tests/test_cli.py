@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 from dataclasses import fields
@@ -184,6 +185,32 @@ def test_eval_of_the_scripted_baseline_prints_the_lines_scripts_read(tmp_path, c
     assert [int(v) for v in goals.groups()] == [result["goals_for"], result["goals_against"]]
     assert (result["episodes"], result["seed"], result["policy"]) == (3, 0, "scripted")
     assert printed.endswith(f"wrote {out}\n")
+
+
+def test_eval_writes_nothing_it_was_not_asked_to(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    argv = ["eval", "--policy", "scripted", "Foosball-Block-v0", "--episodes", "2"]
+    assert main(argv) == 0
+    assert "wrote" not in capsys.readouterr().out
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("where", ["missing/eval.json", "."])
+def test_eval_refuses_a_json_path_it_cannot_write_before_evaluating(
+    tmp_path, where, monkeypatch, capsys
+):
+    import foosball_gym.cli.evaluate as command
+
+    @functools.wraps(command.evaluate)  # the parser reads its defaults off the signature
+    def evaluate(*args, **kwargs):
+        raise AssertionError("evaluated although the results could not be written")
+
+    monkeypatch.setattr(command, "evaluate", evaluate)
+    argv = ["eval", "--policy", "scripted", "Foosball-Block-v0", "--episodes", "500"]
+    with pytest.raises(SystemExit) as exit_:
+        main([*argv, "--json", str(tmp_path / where)])
+    assert exit_.value.code == 2
+    assert "--json" in capsys.readouterr().err
 
 
 def test_envs_lists_every_environment_with_its_options(capsys):
