@@ -179,3 +179,24 @@ def test_close_twice_is_safe():
     env = gym.make("Foosball-Block-v0")
     env.close()
     env.close()
+
+
+@pytest.mark.parametrize("action", [["0.5"], np.array([0.5 + 0.1j]), "0.5", [None]])
+def test_an_action_must_be_real_numbers(action):
+    env = gym.make("Foosball-Block-v0")
+    try:
+        env.reset(seed=0)
+        with pytest.raises(ValueError, match="number"):
+            env.step(action)
+    finally:
+        env.close()
+
+
+def test_a_closed_env_says_so_on_step_and_reset():
+    env = gym.make("Foosball-Block-v0")
+    env.reset(seed=0)
+    env.close()
+    with pytest.raises(gym.error.ClosedEnvironmentError, match="closed"):
+        env.step([0.0])
+    with pytest.raises(gym.error.ClosedEnvironmentError, match="closed"):
+        env.reset(seed=0)

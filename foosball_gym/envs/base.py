@@ -322,6 +322,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self._still_steps = 0
         self._last_render = 0.0
         self._started = False
+        self._closed = False
 
     def _action_map(self, first: int, count: int) -> tuple[list[int], list[float]]:
         joints, scales = [], []
@@ -408,6 +409,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        if self._closed:
+            raise gym.error.ClosedEnvironmentError("the environment is closed; make a new one")
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = set(options) - set(self.reset_options)
@@ -495,6 +498,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         return self.obs_builder.build(self._pos, self._vel, self._ball)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self._closed:
+            raise gym.error.ClosedEnvironmentError("the environment is closed; make a new one")
         if not self._started:
             raise gym.error.ResetNeeded("call reset() before step()")
         act = self._check_action(action, self._n_act, "action")
@@ -563,6 +568,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         return None
 
     def close(self) -> None:
+        self._closed = True
         sim = getattr(self, "sim", None)
         if sim is not None:
             sim.close()
@@ -573,9 +579,11 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     def _check_action(action: Any, n: int, what: str) -> list[float]:
         try:
             values = action.tolist() if isinstance(action, np.ndarray) else action
-            values = (
-                [float(v) for v in np.ravel(values)] if not isinstance(values, float) else [values]
-            )
+            flat = np.ravel(values) if not isinstance(values, float) else np.array([values])
+            # float() would take "0.5" and drop an imaginary part: only real numbers are actions.
+            if flat.dtype.kind not in "biuf":
+                raise TypeError
+            values = [float(v) for v in flat]
         except (TypeError, ValueError):
             raise ValueError(f"{what} must be {n} number(s) in [-1, 1], got {action!r}") from None
         if len(values) != n:
