@@ -1,7 +1,7 @@
 """Env steps per second of every registered environment, single process, random actions.
 
 Resets are included; the opponent of two-player envs (the default scripted one) is included.
-Physics steps per second = env steps per second x substeps per control step.
+Physics steps per second count every physics step the simulator took (finer near contacts).
 
     python benchmarks/throughput.py [--steps N] [--env ID ...]
 """
@@ -32,10 +32,10 @@ def measure(env_id: str, steps: int, seed: int = 0, **kwargs) -> tuple[float, fl
             env.reset()
             resets += 1
     elapsed = time.perf_counter() - start
-    substeps = env.unwrapped.sim.physics_steps / max(1, steps + resets)
+    physics_per_step = env.unwrapped.sim.physics_steps / steps
     env.close()
     rate = steps / elapsed
-    return rate, rate * substeps, resets
+    return rate, rate * physics_per_step, resets
 
 
 def main() -> None:
