@@ -69,23 +69,28 @@ def test_rolling_resistance_sets_how_far_the_ball_rolls(resistance):
     assert distance == pytest.approx(expected, rel=0.1)
 
 
-@pytest.mark.parametrize("ball_start", ["resting", "incoming"])
-def test_a_kick_keeps_the_ball_on_the_table(ball_start):
-    env = gym.make("Foosball-Score-v0", ball_start=ball_start)
+def scripted_games(env_id: str, seeds: range, **kwargs):
+    """Play the task's scripted policy for every seed; yields (seed, env, info) after each step."""
+    env = gym.make(env_id, **kwargs)
     policy = env.unwrapped.scripted_policy()
-    sim = env.unwrapped.sim
-    highest = 0.0
     try:
-        for seed in range(15):
+        for seed in seeds:
             obs, _ = env.reset(seed=seed)
             done = False
             while not done:
                 obs, _, terminated, truncated, info = env.step(policy(obs))
-                highest = max(highest, sim.ball_state().position[2] - T.BALL_RADIUS)
-                assert not info["out_of_table"], seed
+                yield seed, env.unwrapped, info
                 done = terminated or truncated
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("ball_start", ["resting", "incoming"])
+def test_a_kick_keeps_the_ball_on_the_table(ball_start):
+    highest = 0.0
+    for seed, env, info in scripted_games("Foosball-Score-v0", range(15), ball_start=ball_start):
+        highest = max(highest, env.sim.ball_state().position[2] - T.BALL_RADIUS)
+        assert not info["out_of_table"], seed
     # A kick may make the ball hop, never fly: its lowest point stays below the feet's soles.
     assert highest < T.FIGURINE_FOOT_HEIGHT + 0.005
 
@@ -163,17 +168,9 @@ def test_the_drives_never_outrun_the_speed_the_near_contact_test_assumes():
 def test_scripted_full_games_keep_the_ball_on_the_table():
     # What is left: a ball hopping off the surface and struck in the air by a swinging foot.
     # 3 of 100 scripted games on this physics, 22 of 100 before (README, the simulated table).
-    env = gym.make("Foosball-FullGame-v0")
-    policy = env.unwrapped.scripted_policy()
-    outs = 0
-    try:
-        for seed in range(10):
-            obs, _ = env.reset(seed=seed)
-            done = False
-            while not done:
-                obs, _, terminated, truncated, info = env.step(policy(obs))
-                done = terminated or truncated
-            outs += info["out_of_table"]
-    finally:
-        env.close()
-    assert outs == 0  # with 0.05 friction on the figurines, seed 0 lost its ball
+    lost = {
+        seed
+        for seed, _, info in scripted_games("Foosball-FullGame-v0", range(10))
+        if info["out_of_table"]
+    }
+    assert lost == set()  # with 0.05 friction on the figurines, seed 0 lost its ball
