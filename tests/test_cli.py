@@ -136,6 +136,16 @@ def config_of(parser, argv):
             "argument --pattern: expected COLUMNSxROWS",
         ),
         (["envs", "--all"], "unrecognized arguments: --all"),
+        (["frobnicate"], "invalid choice"),
+        (["train", "Foosball-Block-v0", "--env-kwarg", "speed"], "KEY=VALUE"),
+        pytest.param(
+            ["train", "Foosball-Block-v0", "--self-play", "--no-progress"],
+            "no opponent",
+            marks=needs_train,
+        ),
+        (["train", "Foosball-Block-v0", "--timesteps", "0"], "at least 1"),
+        pytest.param(["train", "--resume", "/nonexistent/run"], "no run there", marks=needs_train),
+        pytest.param(["eval", "builtin:nothing"], "no built-in policy", marks=needs_train),
     ],
 )
 def test_a_bad_input_exits_with_status_2_and_one_line_naming_it(

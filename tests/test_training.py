@@ -190,32 +190,6 @@ def test_cli_evaluates_the_scripted_baseline_and_records_a_video(tmp_path, capsy
     assert ok and frame.shape == (360, 640, 3) and frames > 10
 
 
-@pytest.mark.parametrize(
-    "argv, message",
-    [
-        (["train", "Foosball-Nothing-v0", "--no-progress"], "unknown environment"),
-        (["train", "Foosball-Block-v0", "--env-kwarg", "speed"], "KEY=VALUE"),
-        (["train", "Foosball-Block-v0", "--env-kwarg", "warp=3", "--no-progress"], "warp"),
-        (["train", "Foosball-Block-v0", "--self-play", "--no-progress"], "no opponent"),
-        (["train", "Foosball-Block-v0", "--timesteps", "0"], "at least 1"),
-        (["train", "--resume", "/nonexistent/run"], "no run there"),
-        (["eval", "/nonexistent/model.zip"], "no model at"),
-        (["eval", "--policy", "scripted", "Foosball-Nothing-v0"], "unknown environment"),
-        (["eval", "builtin:nothing"], "no built-in policy"),
-        (["frobnicate"], "invalid choice"),
-    ],
-)
-def test_bad_arguments_exit_with_status_2_and_a_message(
-    argv, message, capsys, tmp_path, monkeypatch
-):
-    monkeypatch.chdir(tmp_path)
-    with pytest.raises(SystemExit) as exit_info:
-        main(argv)
-    assert exit_info.value.code == 2
-    err = capsys.readouterr().err
-    assert message in err and "Traceback" not in err
-
-
 def test_a_corrupt_model_file_gives_a_clear_error(tmp_path, capsys):
     bad = tmp_path / "model.zip"
     bad.write_bytes(b"this is not a zip file")
