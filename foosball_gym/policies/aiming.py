@@ -19,8 +19,8 @@ from foosball_gym import table as T
 # Ball-minus-figurine y offset (m) -> shot angle from +x (degrees).
 _OFFSETS = np.arange(0.009, 0.0265, 0.001)
 _ANGLES = np.array(
-    [0.0, 2.8, 5.6, 8.6, 9.5, 12.5, 15.4, 20.1, 23.1, 25.9, 27.3, 31.8, 34.4, 40.2, 42.6, 46.1]
-    + [48.2, 53.8]
+    [0.0, 2.7, 5.5, 8.4, 9.3, 13.6, 16.7, 19.7, 22.6, 25.4, 28.4, 31.1, 33.7, 39.4, 41.7, 45.2]
+    + [51.2, 52.9]
 )
 MAX_ANGLE = math.radians(float(_ANGLES[-1]))
 MIN_ANGLE = math.radians(10.0)
