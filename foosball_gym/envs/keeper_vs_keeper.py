@@ -60,12 +60,8 @@ class KeeperVsKeeperEnv(FoosballEnv):
 
     ## Version History
     - v0: first version.
-    - v0, physics revision 2 (ids kept: the package is unreleased): contacts keep their
-      restitution at every speed (no ball CCD; fine physics steps near a possible contact),
-      the CAD figurine's slim leg, the authors' materials (ball on figurine 0.02), rolling
-      resistance, a served ball starts sliding; options ``control_hz``, ``contact_travel``,
-      ``rolling_resistance`` and ``rolling_resistance_range`` (``substeps`` is gone:
-      ``physics_hz`` / ``control_hz``).
+    - v0, physics revision 2: the faithful table (README, "The simulated table");
+      ``control_hz`` replaces ``substeps``.
     """
 
     task_options = {"opponent_prismatic_only": (True, False)}
