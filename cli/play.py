@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         ) from None
     from foosball_gym.hardware.config import ConfigError, load_config
     from foosball_gym.hardware.safety import SafetyError
-    from foosball_gym.interface.task import task_interface
+    from foosball_gym.tasks import task_interface
 
     policy, env_id, env_kwargs = _policy(args)
     try:

@@ -3,7 +3,6 @@ baselines built. What ``foosball envs`` prints and what eval and play fall back 
 
 from __future__ import annotations
 
-import inspect
 from typing import Any
 
 import gymnasium as gym
@@ -23,22 +22,17 @@ def scripted_policy(env_id: str, env_kwargs: dict[str, Any] | None = None) -> An
 
     Raises:
         ValueError: ``env_id`` is not registered, or an option has a bad value.
-        TypeError: the environment has no option of that name.
     """
+    from foosball_gym.tasks import interface_of, make_task
+
     check_env_id(env_id)
-    env = gym.make(env_id, **(env_kwargs or {}))
-    try:
-        return env.unwrapped.scripted_policy()
-    finally:
-        env.close()
+    task, options = make_task(env_id, env_kwargs)
+    return task.scripted_policy(interface_of(task, options).builder.names)
 
 
 def describe_envs() -> str:
     """Every registered environment with its spaces and its options' defaults and values."""
-    from foosball_gym.envs.base import FoosballEnv
-
     lines = []
-    base_params = inspect.signature(FoosballEnv.__init__).parameters
     for env_id in foosball_gym.ENV_IDS:
         spec = gym.spec(env_id)
         env = gym.make(env_id)
@@ -49,15 +43,12 @@ def describe_envs() -> str:
         )
         first = (cls.__doc__ or "").strip().splitlines()[0]
         lines.append(f"    {first}")
-        params = {**base_params, **inspect.signature(cls.__init__).parameters}
-        for name, p in params.items():
-            if name in ("self", "layout", "extras", "kwargs") or p.default is inspect._empty:
-                continue
+        for name, default in cls.option_defaults().items():
             if name.startswith("opponent") and not env.unwrapped.layout.opponent:
                 continue
             values = cls.option_grid().get(name)
             allowed = f"  one of {', '.join(map(repr, values))}" if values else ""
-            lines.append(f"    {name} = {p.default!r}{allowed}")
+            lines.append(f"    {name} = {default!r}{allowed}")
         env.close()
         lines.append("")
     return "\n".join(lines)

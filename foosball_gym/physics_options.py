@@ -46,3 +46,12 @@ def check_physics(
             unit = " m" if name == "contact_travel" else ""
             raise ValueError(f"{name} must be a number in [{low}, {high}]{unit}, got {value!r}")
     return int(physics_hz), int(control_hz), float(contact_travel), float(rolling_resistance)
+
+
+#: The physics options every environment takes, with their defaults, in check_physics' order.
+PHYSICS_DEFAULTS = {
+    "physics_hz": T.PHYSICS_HZ,
+    "control_hz": T.CONTROL_HZ,
+    "contact_travel": T.CONTACT_TRAVEL,
+    "rolling_resistance": T.ROLLING_RESISTANCE,
+}

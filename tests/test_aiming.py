@@ -10,7 +10,6 @@ import pytest
 
 from foosball_gym import table as T
 from foosball_gym.evaluation import evaluate
-from foosball_gym.interface.task import task_interface
 from foosball_gym.policies.aiming import (
     MAX_ANGLE,
     clearance,
@@ -19,6 +18,7 @@ from foosball_gym.policies.aiming import (
     plan_shot,
 )
 from foosball_gym.policies.scripted import KICK_ANGLE, WIND_UP_ANGLE, ScriptedTeam, slide_for
+from foosball_gym.tasks import task_interface
 
 WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
 KEEPER = T.rod("home_keeper")

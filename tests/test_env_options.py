@@ -3,7 +3,6 @@ has the observation its docstring promises."""
 
 from __future__ import annotations
 
-import inspect
 import itertools
 
 import gymnasium as gym
@@ -11,7 +10,6 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 from foosball_gym import ENV_IDS
-from foosball_gym.envs.base import FoosballEnv
 
 
 def grid_cases():
@@ -44,16 +42,13 @@ def test_the_grid_names_every_discrete_option_of_the_constructor(env_id):
     cls, has_opponent = type(env.unwrapped), bool(env.unwrapped.layout.opponent)
     env.close()
     grid = cls.option_grid()
-    params = {
-        **inspect.signature(FoosballEnv.__init__).parameters,
-        **inspect.signature(cls.__init__).parameters,
-    }
-    flags = {name for name, p in params.items() if isinstance(p.default, bool)}
+    defaults = cls.option_defaults()
+    flags = {name for name, default in defaults.items() if isinstance(default, bool)}
     if not has_opponent:
         flags.discard("opponent_prismatic_only")  # rejected where there is no opponent
     assert flags <= set(grid)
     for name, values in grid.items():
-        assert params[name].default == values[0], name
+        assert defaults[name] == values[0], name
 
 
 @pytest.mark.parametrize(

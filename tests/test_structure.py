@@ -46,7 +46,7 @@ def test_importing_the_package_needs_no_torch_and_registers_the_ids():
 
 def test_a_tasks_interface_is_built_without_the_simulator():
     code = (
-        "import sys; from foosball_gym.interface.task import task_interface;"
+        "import sys; from foosball_gym.tasks import task_interface;"
         "i = task_interface('Foosball-KeeperVsKeeper-v0');"
         "assert 'pybullet' not in sys.modules, 'pybullet was imported';"
         "print(len(i.builder.names))"
@@ -61,7 +61,7 @@ def test_the_interface_is_the_environments_own():
     import numpy as np
 
     from foosball_gym import ENV_IDS
-    from foosball_gym.interface.task import task_interface
+    from foosball_gym.tasks import task_interface
 
     for env_id in ENV_IDS:
         for kwargs in ({}, {"joint_velocities": False}):
@@ -75,7 +75,7 @@ def test_the_interface_is_the_environments_own():
             sim_targets = dict(
                 zip(
                     [(r, "slide") for r in u.layout.rods] + [(r, "spin") for r in u.layout.rods],
-                    u._targets,
+                    u.game.targets,
                 )
             )
             for joint, value in interface.action_to_targets(action).items():

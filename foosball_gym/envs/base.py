@@ -1,101 +1,34 @@
-"""The Gymnasium environment every foosball task builds on.
+"""The Gymnasium face of a foosball game.
 
-A task says which rods the learner controls (and which of their joints), which rods an
-opponent plays, which rods stand still as obstacles, how an episode starts and what counts as
-success. This class does the rest: action scaling, driving the simulator, observations,
-reward terms, info, the opponent, rendering and seeding.
+A task (:mod:`foosball_gym.tasks`) says which rods are in play, how an episode starts and
+what counts as success; the game (:mod:`foosball_gym.game`) plays it on the simulated table
+with its opponent. This class adds the rest of what a Gymnasium user expects: checked
+actions, observations, reward terms, info, rendering, seeding and domain randomisation.
 """
 
 from __future__ import annotations
 
-import math
+import inspect
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from foosball_gym import table as T
-from foosball_gym.envs.common import check_range
 from foosball_gym.envs.estimated import CameraNoise, EstimatedState
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
-from foosball_gym.interface.observations import (
-    JOINT_SETS,
-    ObservationBuilder,
-    ObservationOptions,
-    mirrored_builder,
-)
-from foosball_gym.interface.task import Layout, TaskInterface
+from foosball_gym.game import Game, Policy
+from foosball_gym.interface.observations import JOINT_SETS, check_flag
+from foosball_gym.interface.task import TaskInterface, check_action
 from foosball_gym.physics_options import check_physics
 from foosball_gym.policies.scripted import ScriptedTeam
-
-Policy = Callable[[np.ndarray], Any]
+from foosball_gym.tasks.base import Task, check_ball_position, check_pair, split_options
+from foosball_gym.tasks.registry import interface_of
+from foosball_gym.tasks.serves import check_range
 
 RENDER_MODES = ("human", "rgb_array")
-# A ball slower than this (m/s) counts as lying still for the stagnation rule.
-STILL_SPEED = 0.05
-
-
-@dataclass
-class Start:
-    """An episode's first state; joint lists follow ``Layout.rods``."""
-
-    slide: list[float]
-    spin: list[float]
-    ball_position: tuple[float, float]
-    ball_velocity: tuple[float, float]
-
-
-def check_pair(name: str, value: Any) -> tuple[float, float]:
-    try:
-        x, y = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise ValueError(f"option {name!r} must be two numbers (x, y), got {value!r}") from None
-    if not (math.isfinite(x) and math.isfinite(y)):
-        raise ValueError(f"option {name!r} must be finite, got {value!r}")
-    return x, y
-
-
-def check_ball_position(name: str, value: Any) -> tuple[float, float]:
-    x, y = check_pair(name, value)
-    if abs(x) > T.BALL_LIMIT_X or abs(y) > T.BALL_LIMIT_Y:
-        raise ValueError(
-            f"option {name!r} = ({x}, {y}) is off the field; the ball's centre must lie "
-            f"within |x| <= {T.BALL_LIMIT_X:.5f}, |y| <= {T.BALL_LIMIT_Y:.5f} m"
-        )
-    return x, y
-
-
-def _flag(name: str, value: object) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"{name} must be True or False, got {value!r}")
-    return bool(value)
-
-
-def clear_of_ball(rod: T.Rod, slide: float, ball: tuple[float, float]) -> float:
-    """A slide value near ``slide`` at which no figurine of ``rod`` overlaps the ball.
-
-    Tasks put the ball at rest close to a rod; starting with a figurine inside the ball would
-    throw it across the table on the first step.
-    """
-    bx, by = ball
-    reach_x = T.FIGURINE_SIZE[0] / 2 + T.BALL_RADIUS
-    if abs(bx - rod.x) >= reach_x:
-        return slide
-    gap = T.FIGURINE_SIZE[1] / 2 + T.BALL_RADIUS + 0.002
-    d = rod.direction
-    for off in rod.figurine_offsets:
-        fig_y = d * (slide + off)
-        if abs(fig_y - by) < gap:
-            # Move the figurine just beside the ball, on whichever side stays within the limits.
-            for side in (np.sign(fig_y - by) or 1.0, -(np.sign(fig_y - by) or 1.0)):
-                candidate = d * (by + side * gap) - off
-                if abs(candidate) <= rod.slide_limit:
-                    return clear_of_ball(rod, candidate, ball)
-    return slide
 
 
 class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -152,19 +85,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": T.CONTROL_HZ}
-    #: Keys ``reset(options=...)`` accepts; tasks may add their own.
-    reset_options: tuple[str, ...] = ("ball_position", "ball_velocity")
-    #: The task's own discrete options and the values each takes (first: the default).
-    task_options: dict[str, tuple[Any, ...]] = {}
-
-    @classmethod
-    def task_interface(cls, **kwargs: Any) -> TaskInterface:
-        """This task's observation builder and action mapping for ``kwargs``, without building a
-        simulator: what the real table needs to run a policy trained on the task."""
-        env = cls.__new__(cls)
-        env._simulate = False
-        cls.__init__(env, **kwargs)
-        return env.interface
+    #: The task this environment plays; its options are keyword arguments of the env too.
+    task_class: ClassVar[type[Task]]
 
     @classmethod
     def option_grid(cls) -> dict[str, tuple[Any, ...]]:
@@ -173,14 +95,38 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             "joint_velocities": (True, False),
             "observe_figurines": (False, True),
             "estimated_state": (False, True),
-            **cls.task_options,
+            **cls.task_class.options,
         }
 
-    def __init__(
+    @classmethod
+    def option_defaults(cls) -> dict[str, Any]:
+        """Every keyword argument this environment takes, with its default."""
+        task = inspect.signature(cls.task_class.__init__).parameters
+        env = inspect.signature(cls._setup).parameters
+        defaults = {
+            name: p.default
+            for params in (task, env)
+            for name, p in params.items()
+            if p.default is not inspect.Parameter.empty
+        }
+        return {**defaults, **cls.task_class.env_defaults}
+
+    def __init__(self, **kwargs: Any) -> None:
+        allowed = self.option_defaults()
+        unknown = sorted(set(kwargs) - set(allowed))
+        if unknown:
+            raise TypeError(
+                f"{type(self).__name__} has no option {', '.join(map(repr, unknown))}; "
+                f"allowed: {', '.join(sorted(allowed))}"
+            )
+        task_kwargs, env_kwargs = split_options(self.task_class, kwargs)
+        self._closed = False
+        self._setup(self.task_class(**task_kwargs), **env_kwargs)
+
+    def _setup(
         self,
-        layout: Layout,
+        task: Task,
         *,
-        extras: Sequence[str] = (),
         opponent: Policy | None = None,
         goal_reward: float = 1000.0,
         out_of_table_penalty: float = 1000.0,
@@ -208,6 +154,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         contact_travel: float = T.CONTACT_TRAVEL,
         rolling_resistance: float = T.ROLLING_RESISTANCE,
     ) -> None:
+        layout = task.layout
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(
                 f"unknown render_mode {render_mode!r}; allowed: None, "
@@ -230,13 +177,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise ValueError(
                 f"stagnation_steps must be a non-negative integer, got {stagnation_steps!r}"
             )
-        if _flag("opponent_prismatic_only", opponent_prismatic_only) and not layout.opponent:
-            raise ValueError(
-                f"opponent_prismatic_only applies only to tasks with an opponent; "
-                f"{type(self).__name__} has none"
-            )
         if opponent is not None and not layout.opponent:
             raise ValueError(f"{type(self).__name__} has no opponent to set")
+        self.task = task
         self.layout = layout
         self.render_mode = render_mode
         self.render_width, self.render_height = int(render_width), int(render_height)
@@ -250,12 +193,17 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             shaping=shaping,
             gamma=gamma,
         )
-        self.observation_options = ObservationOptions(
-            joint_velocities=_flag("joint_velocities", joint_velocities),
-            opponent_prismatic_only=opponent_prismatic_only,
-            observe_figurines=_flag("observe_figurines", observe_figurines),
+        self.interface: TaskInterface = interface_of(
+            task,
+            {
+                "joint_velocities": joint_velocities,
+                "observe_figurines": observe_figurines,
+                "opponent_prismatic_only": opponent_prismatic_only,
+            },
         )
-        self.stagnation_steps = int(stagnation_steps)
+        self.observation_options = self.interface.builder.options
+        self.obs_builder = self.interface.builder
+        self.observation_space = self.obs_builder.space
         self.randomisation = {
             name: check_range(name, value, low, high)
             for name, value, low, high in (
@@ -267,103 +215,49 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             )
             if value is not None
         }
-
-        self.dt = 1.0 / control_hz
-        self.sim = None
-        if getattr(self, "_simulate", True):
-            # Imported here: the real table builds a task's interface without the simulator.
-            from foosball_gym.simulator import TableSim
-
-            self.sim = TableSim(
-                layout.rods,
-                physics_hz=physics_hz,
-                control_hz=control_hz,
-                contact_travel=contact_travel,
-                rolling_resistance=rolling_resistance,
-                gui=render_mode == "human",
-            )
-            self._base_gains = (self.sim.slide_gain, self.sim.spin_gain)
-        n = len(layout.rods)
-        self._n = n
-        self._rods = [T.rod(r) for r in layout.rods]
-        n_own = len(layout.controlled)
-        # Action k drives joint _act_joint[k] (an index into the simulator's slides-then-spins).
-        self._act_joint, self._act_scale = self._action_map(0, n_own)
-        self._n_act = len(self._act_joint)
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(self._n_act,), dtype=np.float32)
-
-        self.interface = TaskInterface.create(layout, extras, self.observation_options)
-        self.obs_builder = self.interface.builder
         self._estimated: EstimatedState | None = None
-        if _flag("estimated_state", estimated_state):
+        if check_flag("estimated_state", estimated_state):
             self._estimated = EstimatedState(
                 self.obs_builder, CameraNoise.from_dict(camera_noise), self.np_random
             )
         elif camera_noise is not None:
             raise ValueError("camera_noise needs estimated_state=True")
-        self.observation_space = self.obs_builder.space
-        self._rewards = RewardComputer(self.weights, self._rods[:n_own])
+        self._n_act = self.interface.n_actions
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(self._n_act,), dtype=np.float32)
+        self._rewards = RewardComputer(self.weights, [T.rod(r) for r in layout.controlled])
+        self.dt = 1.0 / control_hz
 
-        self._opp_builder: ObservationBuilder | None = None
-        self._opp_joint: list[int] = []
-        self._opp_scale: list[float] = []
-        self._opponent: Policy | None = None
-        if layout.opponent:
-            self._opp_builder = mirrored_builder(self.obs_builder)
-            self._opp_joint, self._opp_scale = self._action_map(n_own, len(layout.opponent))
-            self.set_opponent(opponent)
+        # Imported here: building a task's interface needs no simulator.
+        from foosball_gym.simulator import TableSim
 
-        self._targets = [0.0] * (2 * n)
-        self._pos: list[float] = [0.0] * (2 * n)
-        self._vel: list[float] = [0.0] * (2 * n)
-        self._ball = (0.0, 0.0, 0.0, 0.0)
-        self._goals_for = 0
-        self._goals_against = 0
-        self._still_steps = 0
+        self.sim = TableSim(
+            layout.rods,
+            physics_hz=physics_hz,
+            control_hz=control_hz,
+            contact_travel=contact_travel,
+            rolling_resistance=rolling_resistance,
+            gui=render_mode == "human",
+        )
+        self._base_gains = (self.sim.slide_gain, self.sim.spin_gain)
+        self.game = Game(
+            task, self.interface, self.sim, opponent=opponent, stagnation_steps=stagnation_steps
+        )
         self._last_render = 0.0
         self._started = False
-        self._closed = False
-
-    def _action_map(self, first: int, count: int) -> tuple[list[int], list[float]]:
-        joints, scales = [], []
-        for i in range(first, first + count):
-            joints.append(i)
-            scales.append(self._rods[i].slide_limit)
-            if self.layout.joints == "both":
-                joints.append(self._n + i)
-                scales.append(T.SPIN_LIMIT)
-        return joints, scales
-
-    # ------------------------------------------------------------------ task hooks
-
-    def _sample_start(
-        self,
-        ball_position: tuple[float, float] | None,
-        ball_velocity: tuple[float, float] | None,
-        options: dict[str, Any],
-    ) -> Start:
-        raise NotImplementedError
-
-    def success(self, goals_for: int, goals_against: int) -> bool:
-        """Whether the task is met with this score so far."""
-        raise NotImplementedError
-
-    def _is_success(self) -> bool:
-        return self.success(self._goals_for, self._goals_against)
-
-    def _continues_after_goal(self) -> bool:
-        """True where a goal (or a dead ball) re-serves instead of ending the episode."""
-        return False
 
     # ------------------------------------------------------------------ policies
 
     def scripted_policy(self) -> ScriptedTeam:
         """The scripted baseline for the learner's side of this task."""
-        return ScriptedTeam(self.obs_builder.names, self.layout.controlled, self.layout.joints)
+        return self.task.scripted_policy(self.obs_builder.names)
+
+    def success(self, goals_for: int, goals_against: int) -> bool:
+        """Whether the task is met with this score so far."""
+        return self.task.success(goals_for, goals_against)
 
     @property
     def opponent(self) -> Policy | None:
-        return self._opponent
+        return self.game.opponent
 
     def set_opponent(self, policy: Policy | None) -> None:
         """Set the policy that plays the away side: a callable from the mirrored observation
@@ -371,38 +265,13 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         ``None`` restores the scripted default."""
         if not self.layout.opponent:
             raise ValueError(f"{type(self).__name__} has no opponent to set")
-        if policy is not None and not callable(policy):
-            raise ValueError(f"an opponent must be a callable obs -> action, got {policy!r}")
-        if policy is None:
-            assert self._opp_builder is not None
-            policy = ScriptedTeam(
-                self._opp_builder.names, self._opp_builder.own, self.layout.joints
-            )
-        self._opponent = policy
-
-    def opponent_targets(self) -> dict[tuple[str, str], float]:
-        """The away rods' joint targets (m, rad) the opponent chooses in the current state."""
-        if self._opponent is None:
-            raise ValueError(f"{type(self).__name__} has no opponent")
-        action = self._check_action(
-            self._opponent(self.opponent_observation()), len(self._opp_joint), "opponent action"
-        )
-        return {
-            self._joint_name(j): a * scale
-            for j, scale, a in zip(self._opp_joint, self._opp_scale, action)
-        }
-
-    def _joint_name(self, index: int) -> tuple[str, str]:
-        """(rod, joint) of an index into the simulator's slides-then-spins."""
-        if index < self._n:
-            return self.layout.rods[index], "slide"
-        return self.layout.rods[index - self._n], "spin"
+        self.game.set_opponent(policy)
 
     def opponent_observation(self) -> np.ndarray:
         """What the opponent sees now: the mirrored observation."""
-        if self._opp_builder is None:
+        if not self.layout.opponent:
             raise ValueError(f"{type(self).__name__} has no opponent")
-        return self._opp_builder.build(self._pos, self._vel, self._ball)
+        return self.game.opponent_observation()
 
     # ------------------------------------------------------------------ gym API
 
@@ -413,52 +282,30 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise gym.error.ClosedEnvironmentError("the environment is closed; make a new one")
         super().reset(seed=seed)
         options = dict(options or {})
-        unknown = set(options) - set(self.reset_options)
+        allowed = self.task.reset_options
+        unknown = set(options) - set(allowed)
         if unknown:
             raise ValueError(
-                f"unknown reset option(s) {sorted(unknown)}; allowed: "
-                f"{', '.join(self.reset_options)}"
+                f"unknown reset option(s) {sorted(unknown)}; allowed: {', '.join(allowed)}"
             )
-        ball_position = options.get("ball_position")
-        ball_velocity = options.get("ball_velocity")
+        ball_position = options.pop("ball_position", None)
+        ball_velocity = options.pop("ball_velocity", None)
         if ball_position is not None:
             ball_position = check_ball_position("ball_position", ball_position)
         if ball_velocity is not None:
             ball_velocity = check_pair("ball_velocity", ball_velocity)
-        self._goals_for = self._goals_against = 0
         dynamics = self._randomise_dynamics()
         if self._estimated is not None:
             self._estimated.rng = self.np_random
-        self._serve(self._sample_start(ball_position, ball_velocity, options))
+        self._start(self.task.sample_start(self.np_random, ball_position, ball_velocity, options))
         self._started = True
         obs = self._observe()
-        info = {"goal": 0, "is_success": self._is_success(), **self._score_info()}
+        info = {"goal": 0, "is_success": self.game.success, **self._score_info()}
         if dynamics:
             info["dynamics"] = dynamics
         if self.render_mode == "human":
             self.render()
         return obs, info
-
-    def serve(self) -> None:
-        """Put a new ball in play the way this task starts an episode, leaving the rods where
-        they are: a serve in a running game (the simulated real table uses it). The score and
-        the shaping potentials start afresh."""
-        for _ in range(20):
-            start = self._sample_start(None, None, {})
-            if all(
-                clear_of_ball(rod, s, start.ball_position) == s
-                for rod, s in zip(self._rods, self._pos[: self._n])
-            ):
-                break
-        self.sim.place_ball(start.ball_position, start.ball_velocity)
-        self._goals_for = self._goals_against = 0
-        self.refresh()
-        self._still_steps = 0
-        self._rewards.reset(self._controlled_slides(), self._ball[0], self._ball[1], self._n_act)
-
-    def refresh(self) -> None:
-        """Re-read the simulator's state, after something other than :meth:`step` moved it."""
-        self._read_state()
 
     def _randomise_dynamics(self) -> dict[str, float]:
         """Draw this episode's physical parameters where randomisation is on."""
@@ -479,82 +326,59 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             self.sim.set_drive_gains(slide * drawn["drive_gain"], spin * drawn["drive_gain"])
         return drawn
 
-    def _serve(self, start: Start) -> None:
-        slide = [
-            clear_of_ball(rod, s, start.ball_position) for rod, s in zip(self._rods, start.slide)
-        ]
-        self.sim.reset(slide, start.spin, start.ball_position, start.ball_velocity)
-        for i, value in enumerate((*slide, *start.spin)):
-            self._targets[i] = float(value)
-        self._read_state()
-        self._still_steps = 0
-        self._rewards.reset(self._controlled_slides(), self._ball[0], self._ball[1], self._n_act)
+    def _start(self, start) -> None:
+        game = self.game
+        game.start(start)
+        self._rewards.reset(self._controlled_slides(), game.ball[0], game.ball[1], self._n_act)
         if self._estimated is not None:
-            self._estimated.reset(self._ball, self._pos, self.sim.figurine_positions())
+            self._estimated.reset(game.ball, game.positions, self.sim.figurine_positions())
 
     def _observe(self) -> np.ndarray:
+        game = self.game
         if self._estimated is not None:
-            return self._estimated.observation(self._pos, self._vel)
-        return self.obs_builder.build(self._pos, self._vel, self._ball)
+            return self._estimated.observation(game.positions, game.velocities)
+        return self.obs_builder.build(game.positions, game.velocities, game.ball)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._closed:
             raise gym.error.ClosedEnvironmentError("the environment is closed; make a new one")
         if not self._started:
             raise gym.error.ResetNeeded("call reset() before step()")
-        act = self._check_action(action, self._n_act, "action")
-        targets = self._targets
-        for k, a in enumerate(act):
-            targets[self._act_joint[k]] = a * self._act_scale[k]
-        if self._opponent is not None:
-            opp = self._check_action(
-                self._opponent(self.opponent_observation()), len(self._opp_joint), "opponent action"
-            )
-            for k, a in enumerate(opp):
-                targets[self._opp_joint[k]] = a * self._opp_scale[k]
-        self.sim.command("position", targets)
-        goal, out = self.sim.step()
-        self._read_state()
+        act = check_action(action, self._n_act, "action")
+        game = self.game
+        game.command(act)
+        outcome = game.advance()
         if self._estimated is not None:
-            self._estimated.advance(self.dt, self._ball, self._pos, self.sim.figurine_positions())
-        if goal == T.HOME_SCORED:
-            self._goals_for += 1
-        elif goal == T.AWAY_SCORED:
-            self._goals_against += 1
-        stagnated = self._stagnated()
-        ended = out or goal != 0 or stagnated
-        continuous = ended and self._continues_after_goal()
+            self._estimated.advance(
+                self.dt, game.ball, game.positions, self.sim.figurine_positions()
+            )
+        continuous = outcome.ended and self.task.continues_after_goal
         terms = self._rewards.step(
-            goal,
-            out,
+            outcome.goal,
+            outcome.out_of_table,
             self._controlled_slides(),
-            self._ball[0],
-            self._ball[1],
+            game.ball[0],
+            game.ball[1],
             act,
-            ended and not continuous,
+            outcome.ended and not continuous,
         )
         info = {
-            "goal": goal,
-            "is_success": self._is_success(),
-            "out_of_table": out,
-            "stagnated": stagnated,
+            "goal": outcome.goal,
+            "is_success": game.success,
+            "out_of_table": outcome.out_of_table,
+            "stagnated": outcome.stagnated,
             **self._score_info(),
         }
         for name in TERMS:
             info["reward_" + name] = terms[name]
         if continuous:
-            self._serve(self._sample_start(None, None, {}))
+            goals = game.goals_for, game.goals_against
+            self._start(self.task.sample_start(self.np_random))
+            game.goals_for, game.goals_against = goals
         obs = self._observe()
         if self.render_mode == "human":
             self.render()
-        return obs, float(sum(terms.values())), ended and not continuous, False, info
-
-    def _stagnated(self) -> bool:
-        if not self.stagnation_steps:
-            return False
-        _, _, vx, vy = self._ball
-        self._still_steps = self._still_steps + 1 if vx * vx + vy * vy < STILL_SPEED**2 else 0
-        return self._still_steps >= self.stagnation_steps
+        return obs, float(sum(terms.values())), outcome.ended and not continuous, False, info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode == "rgb_array":
@@ -575,41 +399,15 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
 
     # ------------------------------------------------------------------ helpers
 
-    @staticmethod
-    def _check_action(action: Any, n: int, what: str) -> list[float]:
-        try:
-            values = action.tolist() if isinstance(action, np.ndarray) else action
-            flat = np.ravel(values) if not isinstance(values, float) else np.array([values])
-            # float() would take "0.5" and drop an imaginary part: only real numbers are actions.
-            if flat.dtype.kind not in "biuf":
-                raise TypeError
-            values = [float(v) for v in flat]
-        except (TypeError, ValueError):
-            raise ValueError(f"{what} must be {n} number(s) in [-1, 1], got {action!r}") from None
-        if len(values) != n:
-            raise ValueError(
-                f"{what} must have {n} value(s) in [-1, 1], got {len(values)}: {action!r}"
-            )
-        out = []
-        for v in values:
-            if v != v or v in (math.inf, -math.inf):
-                raise ValueError(f"{what} must be finite, got {values}")
-            out.append(-1.0 if v < -1.0 else 1.0 if v > 1.0 else v)
-        return out
-
-    def _read_state(self) -> None:
-        self._pos, self._vel = self.sim.joint_states()
-        self._ball = self.sim.ball_xy()
-
     def _controlled_slides(self) -> list[float]:
-        return self._pos[: len(self.layout.controlled)]
+        return self.game.positions[: len(self.layout.controlled)]
 
     def _score_info(self) -> dict[str, Any]:
         if not self.layout.opponent:
             return {}
-        return {"goals_for": self._goals_for, "goals_against": self._goals_against}
+        return {"goals_for": self.game.goals_for, "goals_against": self.game.goals_against}
 
     def rod_joint_values(self) -> tuple[list[float], list[float]]:
         """Joint positions and velocities of the rods in play (all slides, then all spins, in
         ``layout.rods`` order), as of the last reset or step."""
-        return list(self._pos), list(self._vel)
+        return list(self.game.positions), list(self.game.velocities)

@@ -1,18 +1,7 @@
 """Foosball-Block-v0: the home keeper blocks shots at its goal."""
 
-from __future__ import annotations
-
-from typing import Any
-
-from foosball_gym import table as T
-from foosball_gym.envs.base import FoosballEnv, Start
-from foosball_gym.envs.common import (
-    SHOT_SPEED_LIMITS,
-    check_range,
-    random_shot_start,
-    shot_at_goal,
-)
-from foosball_gym.interface.task import Layout
+from foosball_gym.envs.base import FoosballEnv
+from foosball_gym.tasks.block import BlockTask
 
 
 class BlockEnv(FoosballEnv):
@@ -69,19 +58,4 @@ class BlockEnv(FoosballEnv):
       ``control_hz`` replaces ``substeps``.
     """
 
-    def __init__(self, *, speed_range: tuple[float, float] = (2.0, 7.0), **kwargs: Any) -> None:
-        self.speed_range = check_range("speed_range", speed_range, *SHOT_SPEED_LIMITS)
-        super().__init__(Layout(controlled=("home_keeper",), joints="slide"), **kwargs)
-
-    def _sample_start(self, ball_position, ball_velocity, options: dict[str, Any]) -> Start:
-        rng = self.np_random
-        position, velocity = random_shot_start(rng, self.speed_range)
-        if ball_position is not None:
-            position = ball_position
-            velocity = shot_at_goal(rng, position, self.speed_range, T.HOME)
-        if ball_velocity is not None:
-            velocity = ball_velocity
-        return Start([0.0], [0.0], position, velocity)
-
-    def success(self, goals_for: int, goals_against: int) -> bool:
-        return goals_against == 0
+    task_class = BlockTask

@@ -89,7 +89,7 @@ class EstimatedState:
         self.builder = builder
         self.noise = noise
         self.rng = rng
-        self.tracked = [*builder.opponent, *builder.extras]
+        self.tracked = list(builder.tracked_rods)
         self._slot = {name: builder.rods_in_play.index(name) for name in self.tracked}
         self.estimator = self._make()
         self._pending: deque[tuple[float, tuple[float, float] | None, dict]] = deque()

@@ -1,14 +1,7 @@
 """Foosball-FullGame-v0: all eight rods, the whole game."""
 
-from __future__ import annotations
-
-from typing import Any
-
-import numpy as np
-
-from foosball_gym import table as T
-from foosball_gym.envs.base import FoosballEnv, Start
-from foosball_gym.interface.task import Layout
+from foosball_gym.envs.base import FoosballEnv
+from foosball_gym.tasks.full_game import FullGameTask
 
 
 class FullGameEnv(FoosballEnv):
@@ -62,38 +55,4 @@ class FullGameEnv(FoosballEnv):
       ``control_hz`` replaces ``substeps``.
     """
 
-    task_options = {"opponent_prismatic_only": (False, True), "continuous": (False, True)}
-
-    def __init__(
-        self, *, continuous: bool = False, stagnation_steps: int = 60, **kwargs: Any
-    ) -> None:
-        if not isinstance(continuous, (bool, np.bool_)):
-            raise ValueError(f"continuous must be True or False, got {continuous!r}")
-        self.continuous = bool(continuous)
-        home = tuple(r.name for r in T.team_rods(T.HOME))
-        away = tuple(r.name for r in T.team_rods(T.AWAY))
-        super().__init__(
-            Layout(controlled=home, joints="both", opponent=away),
-            stagnation_steps=stagnation_steps,
-            **kwargs,
-        )
-
-    def _sample_start(self, ball_position, ball_velocity, options: dict[str, Any]) -> Start:
-        rng = self.np_random
-        side = 1.0 if rng.random() < 0.5 else -1.0
-        position = (0.0, 0.3 * side)
-        vx = float(rng.uniform(0.25, 1.0)) * (1.0 if rng.random() < 0.5 else -1.0)
-        velocity = (vx, -side * float(rng.uniform(1.0, 2.0)))
-        if ball_position is not None:
-            position = ball_position
-        if ball_velocity is not None:
-            velocity = ball_velocity
-        return Start([0.0] * 8, [0.0] * 8, position, velocity)
-
-    def success(self, goals_for: int, goals_against: int) -> bool:
-        if self.continuous:
-            return goals_for > goals_against
-        return goals_for > 0
-
-    def _continues_after_goal(self) -> bool:
-        return self.continuous
+    task_class = FullGameTask

@@ -1,13 +1,7 @@
 """Foosball-KeeperVsKeeper-v0: the two keepers play each other."""
 
-from __future__ import annotations
-
-from typing import Any
-
-from foosball_gym import table as T
-from foosball_gym.envs.base import FoosballEnv, Start
-from foosball_gym.envs.common import resting_in_front_of
-from foosball_gym.interface.task import Layout
+from foosball_gym.envs.base import FoosballEnv
+from foosball_gym.tasks.keeper_vs_keeper import KeeperVsKeeperTask
 
 
 class KeeperVsKeeperEnv(FoosballEnv):
@@ -64,30 +58,4 @@ class KeeperVsKeeperEnv(FoosballEnv):
       ``control_hz`` replaces ``substeps``.
     """
 
-    task_options = {"opponent_prismatic_only": (True, False)}
-
-    def __init__(
-        self,
-        *,
-        opponent_prismatic_only: bool = True,
-        stagnation_steps: int = 60,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(
-            Layout(controlled=("home_keeper",), joints="both", opponent=("away_keeper",)),
-            opponent_prismatic_only=opponent_prismatic_only,
-            stagnation_steps=stagnation_steps,
-            **kwargs,
-        )
-
-    def _sample_start(self, ball_position, ball_velocity, options: dict[str, Any]) -> Start:
-        rng = self.np_random
-        team = T.HOME if rng.random() < 0.5 else T.AWAY
-        position = resting_in_front_of(rng, team)
-        if ball_position is not None:
-            position = ball_position
-        velocity = (0.0, 0.0) if ball_velocity is None else ball_velocity
-        return Start([0.0, 0.0], [0.0, 0.0], position, velocity)
-
-    def success(self, goals_for: int, goals_against: int) -> bool:
-        return goals_for > 0
+    task_class = KeeperVsKeeperTask

@@ -39,7 +39,7 @@ class TableStateEstimator:
         self.latency = latency_s
         self.ball = ball if ball is not None else BallFilter()
         # The rods the camera tracks: the opponent's, and still obstacles (observed by slide).
-        tracked = [*builder.opponent, *builder.extras]
+        tracked = list(builder.tracked_rods)
         self.rods = {
             name: RodFilter(T.rod(name).slide_limit, rod_measurement_std) for name in tracked
         }

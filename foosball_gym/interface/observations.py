@@ -51,6 +51,32 @@ class ObservationOptions:
     observe_figurines: bool = False
 
 
+def check_flag(name: str, value: object) -> bool:
+    """``value`` as a bool, or a ValueError: options that are flags take True or False only."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def observation_options(
+    has_opponent: bool,
+    joint_velocities: bool = True,
+    observe_figurines: bool = False,
+    opponent_prismatic_only: bool = False,
+) -> ObservationOptions:
+    """Checked observation options for a task with or without an opponent."""
+    if check_flag("opponent_prismatic_only", opponent_prismatic_only) and not has_opponent:
+        raise ValueError("opponent_prismatic_only applies only to tasks with an opponent")
+    return ObservationOptions(
+        joint_velocities=check_flag("joint_velocities", joint_velocities),
+        opponent_prismatic_only=bool(opponent_prismatic_only),
+        observe_figurines=check_flag("observe_figurines", observe_figurines),
+    )
+
+
+OBSERVATION_OPTIONS = ("joint_velocities", "observe_figurines", "opponent_prismatic_only")
+
+
 def _joints(rod: T.Rod, joints: str) -> tuple[str, ...]:
     return ("slide",) if joints == "slide" else ("slide", "spin")
 
@@ -154,6 +180,12 @@ class ObservationBuilder:
                 prefix = "v" if velocities else ""
                 names += [f"{rod_name}_figurine_{i}_{prefix}{a}" for a in axes]
         return names
+
+    @property
+    def tracked_rods(self) -> tuple[str, ...]:
+        """Rods whose state the real table can only see through its camera: the opponent's
+        and the static obstacles'."""
+        return (*self.opponent, *self.extras)
 
     @property
     def size(self) -> int:

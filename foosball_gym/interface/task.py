@@ -7,11 +7,12 @@ into the same vector and an action into the same targets.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import gymnasium as gym
+import numpy as np
 
 from foosball_gym import table as T
 from foosball_gym.interface.observations import ObservationBuilder, ObservationOptions
@@ -40,6 +41,44 @@ class Layout:
         return self.controlled + self.opponent + self.static
 
 
+def action_joints(
+    rods: Sequence[str], joints: str
+) -> tuple[tuple[Joint, ...], tuple[float, ...], tuple[Joint, ...]]:
+    """The joints an action over ``rods`` drives (rod by rod, prismatic first), the factor from
+    an action in [-1, 1] to each joint's target, and the joints no action drives."""
+    driven, scales, held = [], [], []
+    for name in rods:
+        driven.append((name, "slide"))
+        scales.append(T.rod(name).slide_limit)
+        if joints == "both":
+            driven.append((name, "spin"))
+            scales.append(T.SPIN_LIMIT)
+        else:
+            held.append((name, "spin"))
+    return tuple(driven), tuple(scales), tuple(held)
+
+
+def check_action(action: Any, n: int, what: str = "action") -> list[float]:
+    """``action`` as ``n`` floats clipped to [-1, 1], or a ValueError saying what is wrong."""
+    try:
+        values = action.tolist() if isinstance(action, np.ndarray) else action
+        flat = np.ravel(values) if not isinstance(values, float) else np.array([values])
+        # float() would take "0.5" and drop an imaginary part: only real numbers are actions.
+        if flat.dtype.kind not in "biuf":
+            raise TypeError
+        values = [float(v) for v in flat]
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be {n} number(s) in [-1, 1], got {action!r}") from None
+    if len(values) != n:
+        raise ValueError(f"{what} must have {n} value(s) in [-1, 1], got {len(values)}: {action!r}")
+    out = []
+    for v in values:
+        if v != v or v in (math.inf, -math.inf):
+            raise ValueError(f"{what} must be finite, got {values}")
+        out.append(-1.0 if v < -1.0 else 1.0 if v > 1.0 else v)
+    return out
+
+
 @dataclass(frozen=True)
 class TaskInterface:
     """A task's observation builder and action mapping.
@@ -66,16 +105,7 @@ class TaskInterface:
         builder = ObservationBuilder(
             layout.rods, layout.controlled, layout.joints, layout.opponent, extras, options
         )
-        joints, scales, held = [], [], []
-        for name in layout.controlled:
-            joints.append((name, "slide"))
-            scales.append(T.rod(name).slide_limit)
-            if layout.joints == "both":
-                joints.append((name, "spin"))
-                scales.append(T.SPIN_LIMIT)
-            else:
-                held.append((name, "spin"))
-        return cls(layout, builder, tuple(joints), tuple(scales), tuple(held))
+        return cls(layout, builder, *action_joints(layout.controlled, layout.joints))
 
     @property
     def n_actions(self) -> int:
@@ -83,22 +113,9 @@ class TaskInterface:
 
     def action_to_targets(self, action: Sequence[float]) -> dict[Joint, float]:
         """Joint targets (m, rad) for an action, clipped to [-1, 1] as the env does."""
-        if len(action) != self.n_actions:
-            raise ValueError(f"action must have {self.n_actions} values, got {len(action)}")
         targets = {joint: 0.0 for joint in self.held_joints}
-        for joint, scale, a in zip(self.action_joints, self.action_scales, action):
-            targets[joint] = scale * min(max(float(a), -1.0), 1.0)
+        for joint, scale, a in zip(
+            self.action_joints, self.action_scales, check_action(action, self.n_actions)
+        ):
+            targets[joint] = scale * a
         return targets
-
-
-def task_interface(env_id: str, env_kwargs: dict[str, Any] | None = None) -> TaskInterface:
-    """The interface of a registered environment with these options, built without a simulator."""
-    if env_id not in gym.registry:
-        import foosball_gym
-
-        raise ValueError(
-            f"unknown environment {env_id!r}; registered: {', '.join(foosball_gym.ENV_IDS)}"
-        )
-    spec = gym.spec(env_id)
-    cls = gym.envs.registration.load_env_creator(spec.entry_point)
-    return cls.task_interface(**{**spec.kwargs, **(env_kwargs or {})})

@@ -87,7 +87,7 @@ def build_perception(
         detector = ColourBallDetector(**vision.get("ball", {}))
     # The camera follows the opponent's rods, and still obstacles where a task has them.
     builder = interface.builder
-    tracked = [T.rod(name) for name in (*builder.opponent, *builder.extras)]
+    tracked = [T.rod(name) for name in builder.tracked_rods]
     tracker = RodTracker(calibration, tracked, **vision.get("rods", {})) if tracked else None
     latency = latency_s if latency_s is not None else estimation.get("latency_s", 0.03)
     estimator = TableStateEstimator(
@@ -184,8 +184,8 @@ def play_sim(
     camera_size: tuple[int, int] = (640, 360),
 ) -> PlayReport:
     """Play ``episodes`` served balls on the simulated table, through the whole stack."""
-    from foosball_gym.interface.task import task_interface
     from foosball_gym.sim_table.simulated_table import SimulatedTable, sim_table_config
+    from foosball_gym.tasks import task_interface
 
     interface = task_interface(env_id, env_kwargs)
     config = sim_table_config(interface)

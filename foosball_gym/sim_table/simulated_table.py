@@ -12,14 +12,17 @@ import itertools
 import os
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from foosball_gym import table as T
 from foosball_gym.camera import CameraModel
+from foosball_gym.game import Game
 from foosball_gym.hardware.config import BusConfig, JointConfig, TableConfig
 from foosball_gym.interface.task import TaskInterface
+from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
 from foosball_gym.sim_table.drives import SimulatedDrives
+from foosball_gym.simulator import TableSim
+from foosball_gym.tasks import interface_of, make_task
 
 # Calibration of the simulated drives: arbitrary but drive-like, and the revolute drive turned
 # round, so that a sign error anywhere between policy and rod shows.
@@ -65,7 +68,7 @@ class SimulatedTable:
     """The simulated table for a task.
 
     Args:
-        env_id, env_kwargs: the task the policy was trained on.
+        env_id, env_kwargs: the task the policy was trained on (its physics options apply).
         config: the table configuration the master uses (see :func:`sim_table_config`); its
             bus must be a ``virtual`` one.
         seed: seeds the serves (and the opponent's randomness, if any).
@@ -80,13 +83,27 @@ class SimulatedTable:
         seed: int = 0,
         camera_size: tuple[int, int] = (640, 360),
     ) -> None:
-        self.env = gym.make(env_id, **(env_kwargs or {})).unwrapped
-        self.env.reset(seed=seed)
-        self.sim = self.env.sim
-        self.camera_model = CameraModel(*camera_size)
-        self.drives = SimulatedDrives(config, self.sim)
+        task, options = make_task(env_id, env_kwargs)
+        physics = check_physics(*(options.get(k, d) for k, d in PHYSICS_DEFAULTS.items()))
+        self.sim = TableSim(task.layout.rods, **dict(zip(PHYSICS_DEFAULTS, physics)))
+        try:
+            self.game = Game(task, interface_of(task, options), self.sim)
+            self.rng = np.random.default_rng(seed)
+            self.game.start(task.sample_start(self.rng))
+            self.camera_model = CameraModel(*camera_size)
+            self.drives = SimulatedDrives(config, self.sim)
+        except BaseException:
+            self.sim.close()
+            raise
         self.time = 0.0
-        self.goals_for = self.goals_against = 0
+
+    @property
+    def goals_for(self) -> int:
+        return self.game.goals_for
+
+    @property
+    def goals_against(self) -> int:
+        return self.game.goals_against
 
     def frame(self) -> np.ndarray:
         """The camera's view of the table now, RGB."""
@@ -94,37 +111,31 @@ class SimulatedTable:
 
     def serve(self) -> None:
         """A new ball, as the task starts its episodes; the rods stay where they are."""
-        self.env.serve()
-        self.goals_for = self.goals_against = 0
+        self.game.serve(self.rng)
 
     def step(self) -> tuple[int, bool]:
         """One control step: the drives take their targets, the opponent moves, physics runs.
 
         Returns:
-            ``(goal, out_of_table)`` as :meth:`TableSim.step` reports them.
+            ``(goal, out_of_table)``: goal +1 (home scored), -1 (away scored) or 0.
         """
-        if self.env.layout.opponent:
-            self.drives.set_free_targets(self.env.opponent_targets())
+        if self.game.task.layout.opponent:
+            self.drives.set_free_targets(self.game.opponent_targets())
         self.drives.apply()
-        goal, out = self.sim.step()
-        self.env.refresh()
+        outcome = self.game.advance()
         self.time += self.sim.control_dt
         self.drives.publish()
-        if goal == T.HOME_SCORED:
-            self.goals_for += 1
-        elif goal == T.AWAY_SCORED:
-            self.goals_against += 1
-        return goal, out
+        return outcome.goal, outcome.out_of_table
 
     @property
     def success(self) -> bool:
         """Whether the task is met by the goals since the last serve."""
-        return self.env.success(self.goals_for, self.goals_against)
+        return self.game.success
 
     def ball(self) -> tuple[float, float, float, float]:
         """The true ball x, y, vx, vy (for comparing the estimate with)."""
-        return self.sim.ball_xy()
+        return self.game.ball
 
     def close(self) -> None:
         self.drives.close()
-        self.env.close()
+        self.sim.close()

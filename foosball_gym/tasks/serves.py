@@ -1,4 +1,4 @@
-"""Pieces the task modules share: argument checking and ball serves."""
+"""Ball serves the tasks share, and the checks of their options."""
 
 from __future__ import annotations
 

@@ -1,0 +1,211 @@
+"""A match on the simulated table: serves, goals, the opponent and the state of play.
+
+Both faces of the simulation use it: the Gymnasium environment (:mod:`foosball_gym.envs`),
+which adds actions, observations and rewards, and the simulated real table
+(:mod:`foosball_gym.sim_table`), whose learner's rods are moved by simulated CAN drives
+instead. The game only calls the :class:`~foosball_gym.simulator.TableSim` it is given.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from foosball_gym import table as T
+from foosball_gym.interface.observations import mirrored_builder
+from foosball_gym.interface.task import Joint, TaskInterface, action_joints, check_action
+from foosball_gym.policies.scripted import ScriptedTeam
+from foosball_gym.tasks.base import Start, Task, clear_of_ball
+
+if TYPE_CHECKING:
+    from foosball_gym.simulator import TableSim
+
+Policy = Callable[[np.ndarray], Any]
+
+# A ball slower than this (m/s) counts as lying still for the stagnation rule.
+STILL_SPEED = 0.05
+# Serves drawn in a running game until one leaves every figurine clear of the ball.
+SERVE_TRIES = 20
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What one control step brought: ``goal`` is +1 (home scored), -1 (away scored) or 0."""
+
+    goal: int
+    out_of_table: bool
+    stagnated: bool
+
+    @property
+    def ended(self) -> bool:
+        """Whether the ball is dead: a goal, off the table, or lying still too long."""
+        return self.goal != 0 or self.out_of_table or self.stagnated
+
+
+class Game:
+    """A task played on a simulated table.
+
+    Args:
+        task: what is played.
+        interface: the learner's observation builder and action mapping for the task.
+        sim: the simulated table, holding exactly ``task.layout.rods``.
+        opponent: the away side's policy, a callable from the mirrored observation to an
+            action (tasks with an opponent only; ``None``: the scripted team).
+        stagnation_steps: a ball still for this many steps is dead (0: never).
+
+    Attributes:
+        positions, velocities: joint values of the rods in play, all slides then all spins,
+            in ``task.layout.rods`` order, as of the last serve or step.
+        ball: the ball's x, y, vx, vy then.
+        goals_for, goals_against: goals since the last serve.
+    """
+
+    def __init__(
+        self,
+        task: Task,
+        interface: TaskInterface,
+        sim: TableSim,
+        *,
+        opponent: Policy | None = None,
+        stagnation_steps: int = 0,
+    ) -> None:
+        layout = task.layout
+        if tuple(r.name for r in sim.rods) != layout.rods:
+            raise ValueError(f"the simulator holds {sim.rods}, the task plays {layout.rods}")
+        if opponent is not None and not layout.opponent:
+            raise ValueError(f"{type(task).__name__} has no opponent to set")
+        self.task, self.interface, self.sim = task, interface, sim
+        self.stagnation_steps = int(stagnation_steps)
+        self.rods = [T.rod(name) for name in layout.rods]
+        n = len(self.rods)
+        self._index = {
+            (name, kind): i + (n if kind == "spin" else 0)
+            for i, name in enumerate(layout.rods)
+            for kind in ("slide", "spin")
+        }
+        self._own = [self._index[j] for j in interface.action_joints]
+        self._own_scale = list(interface.action_scales)
+        self._opp_builder = mirrored_builder(interface.builder) if layout.opponent else None
+        opp_joints, opp_scales, _ = action_joints(layout.opponent, layout.joints)
+        self._opp_joints = opp_joints
+        self._opp = [self._index[j] for j in opp_joints]
+        self._opp_scale = list(opp_scales)
+        self._opponent: Policy | None = None
+        if layout.opponent:
+            self.set_opponent(opponent)
+        self.targets = [0.0] * (2 * n)
+        self.positions: list[float] = [0.0] * (2 * n)
+        self.velocities: list[float] = [0.0] * (2 * n)
+        self.ball = (0.0, 0.0, 0.0, 0.0)
+        self.goals_for = self.goals_against = 0
+        self._still_steps = 0
+
+    # ------------------------------------------------------------------ serving
+
+    def start(self, start: Start) -> None:
+        """Put the rods and the ball where ``start`` says (a figurine that would overlap the
+        ball is slid beside it) and the score at 0-0."""
+        slide = [
+            clear_of_ball(rod, s, start.ball_position) for rod, s in zip(self.rods, start.slide)
+        ]
+        self.sim.reset(slide, start.spin, start.ball_position, start.ball_velocity)
+        self.targets[:] = [float(v) for v in (*slide, *start.spin)]
+        self._begin()
+
+    def serve(self, rng: np.random.Generator) -> None:
+        """A new ball, as the task starts its episodes, with the rods left where they are and
+        the score at 0-0: a serve in a running game."""
+        n = len(self.rods)
+        for _ in range(SERVE_TRIES):
+            start = self.task.sample_start(rng)
+            if all(
+                clear_of_ball(rod, s, start.ball_position) == s
+                for rod, s in zip(self.rods, self.positions[:n])
+            ):
+                break
+        self.sim.place_ball(start.ball_position, start.ball_velocity)
+        self._begin()
+
+    def _begin(self) -> None:
+        self.goals_for = self.goals_against = 0
+        self._still_steps = 0
+        self.read_state()
+
+    # ------------------------------------------------------------------ the opponent
+
+    @property
+    def opponent(self) -> Policy | None:
+        return self._opponent
+
+    def set_opponent(self, policy: Policy | None) -> None:
+        """Set the away side's policy; ``None`` restores the scripted team."""
+        if self._opp_builder is None:
+            raise ValueError(f"{type(self.task).__name__} has no opponent to set")
+        if policy is not None and not callable(policy):
+            raise ValueError(f"an opponent must be a callable obs -> action, got {policy!r}")
+        if policy is None:
+            policy = ScriptedTeam(
+                self._opp_builder.names, self._opp_builder.own, self.task.layout.joints
+            )
+        self._opponent = policy
+
+    def opponent_observation(self) -> np.ndarray:
+        """What the opponent sees now: the mirrored observation."""
+        if self._opp_builder is None:
+            raise ValueError(f"{type(self.task).__name__} has no opponent")
+        return self._opp_builder.build(self.positions, self.velocities, self.ball)
+
+    def _opponent_action(self) -> list[float]:
+        assert self._opponent is not None
+        action = self._opponent(self.opponent_observation())
+        return check_action(action, len(self._opp), "opponent action")
+
+    def opponent_targets(self) -> dict[Joint, float]:
+        """The away rods' joint targets (m, rad) the opponent chooses in the current state."""
+        if self._opponent is None:
+            raise ValueError(f"{type(self.task).__name__} has no opponent")
+        action = self._opponent_action()
+        return {j: a * s for j, s, a in zip(self._opp_joints, self._opp_scale, action)}
+
+    # ------------------------------------------------------------------ playing
+
+    def command(self, action: Sequence[float]) -> None:
+        """Drive the learner's joints with a checked action in [-1, 1] and the opponent's with
+        its policy's choice."""
+        targets = self.targets
+        for i, s, a in zip(self._own, self._own_scale, action):
+            targets[i] = a * s
+        if self._opponent is not None:
+            for i, s, a in zip(self._opp, self._opp_scale, self._opponent_action()):
+                targets[i] = a * s
+        self.sim.command("position", targets)
+
+    def advance(self) -> Outcome:
+        """One control step of physics with the rods' targets as last commanded."""
+        goal, out = self.sim.step()
+        self.read_state()
+        if goal == T.HOME_SCORED:
+            self.goals_for += 1
+        elif goal == T.AWAY_SCORED:
+            self.goals_against += 1
+        return Outcome(goal, out, self._stagnated())
+
+    def _stagnated(self) -> bool:
+        if not self.stagnation_steps:
+            return False
+        _, _, vx, vy = self.ball
+        self._still_steps = self._still_steps + 1 if vx * vx + vy * vy < STILL_SPEED**2 else 0
+        return self._still_steps >= self.stagnation_steps
+
+    @property
+    def success(self) -> bool:
+        """Whether the task is met by the goals since the last serve."""
+        return self.task.success(self.goals_for, self.goals_against)
+
+    def read_state(self) -> None:
+        """Re-read the rods and the ball from the simulator."""
+        self.positions, self.velocities = self.sim.joint_states()
+        self.ball = self.sim.ball_xy()

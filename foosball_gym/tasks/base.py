@@ -1,0 +1,123 @@
+"""What a task is, with no simulator behind it: its rods, its serves and its goal.
+
+A :class:`Task` holds only the task's own options. The game (:mod:`foosball_gym.game`) plays
+it on a simulated table and the environment (:mod:`foosball_gym.envs`) puts a Gymnasium face
+on the game; the real table needs only the task's :class:`~foosball_gym.interface.Layout`.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from foosball_gym import table as T
+from foosball_gym.interface.task import Layout
+from foosball_gym.policies.scripted import ScriptedTeam
+
+
+@dataclass
+class Start:
+    """An episode's first state; joint lists follow ``Layout.rods``."""
+
+    slide: list[float]
+    spin: list[float]
+    ball_position: tuple[float, float]
+    ball_velocity: tuple[float, float]
+
+
+def check_pair(name: str, value: Any) -> tuple[float, float]:
+    try:
+        x, y = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"option {name!r} must be two numbers (x, y), got {value!r}") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise ValueError(f"option {name!r} must be finite, got {value!r}")
+    return x, y
+
+
+def check_ball_position(name: str, value: Any) -> tuple[float, float]:
+    x, y = check_pair(name, value)
+    if abs(x) > T.BALL_LIMIT_X or abs(y) > T.BALL_LIMIT_Y:
+        raise ValueError(
+            f"option {name!r} = ({x}, {y}) is off the field; the ball's centre must lie "
+            f"within |x| <= {T.BALL_LIMIT_X:.5f}, |y| <= {T.BALL_LIMIT_Y:.5f} m"
+        )
+    return x, y
+
+
+def clear_of_ball(rod: T.Rod, slide: float, ball: tuple[float, float]) -> float:
+    """A slide value near ``slide`` at which no figurine of ``rod`` overlaps the ball.
+
+    Tasks put the ball at rest close to a rod; starting with a figurine inside the ball would
+    throw it across the table on the first step.
+    """
+    bx, by = ball
+    reach_x = T.FIGURINE_SIZE[0] / 2 + T.BALL_RADIUS
+    if abs(bx - rod.x) >= reach_x:
+        return slide
+    gap = T.FIGURINE_SIZE[1] / 2 + T.BALL_RADIUS + 0.002
+    for off, fig_y in zip(rod.figurine_offsets, rod.figurine_y(slide)):
+        if abs(fig_y - by) < gap:
+            # Move the figurine just beside the ball, on whichever side stays within the limits.
+            for side in (np.sign(fig_y - by) or 1.0, -(np.sign(fig_y - by) or 1.0)):
+                candidate = rod.direction * (by + side * gap) - off
+                if abs(candidate) <= rod.slide_limit:
+                    return clear_of_ball(rod, candidate, ball)
+    return slide
+
+
+class Task:
+    """A foosball task: subclasses set :attr:`layout` in ``__init__`` from their options.
+
+    Class attributes:
+        reset_options: keys ``reset(options=...)`` accepts.
+        options: the task's discrete options and the values each takes (first: the default).
+        env_defaults: the environment's options this task sets otherwise than the base does.
+    """
+
+    layout: Layout
+    extras: tuple[str, ...] = ()
+    reset_options: ClassVar[tuple[str, ...]] = ("ball_position", "ball_velocity")
+    options: ClassVar[dict[str, tuple[Any, ...]]] = {}
+    env_defaults: ClassVar[dict[str, Any]] = {}
+    #: True where a goal (or a dead ball) re-serves instead of ending the episode.
+    continues_after_goal: bool = False
+
+    def sample_start(
+        self,
+        rng: np.random.Generator,
+        ball_position: tuple[float, float] | None = None,
+        ball_velocity: tuple[float, float] | None = None,
+        options: dict[str, Any] | None = None,
+    ) -> Start:
+        """A first state drawn with ``rng``; a given ball position or velocity is kept."""
+        raise NotImplementedError
+
+    def success(self, goals_for: int, goals_against: int) -> bool:
+        """Whether the task is met with this score so far."""
+        raise NotImplementedError
+
+    def scripted_policy(self, names: list[str]) -> ScriptedTeam:
+        """The scripted baseline for the learner's side, on observations with ``names``."""
+        return ScriptedTeam(names, self.layout.controlled, self.layout.joints)
+
+    @classmethod
+    def option_names(cls) -> tuple[str, ...]:
+        """The keyword arguments of this task's constructor."""
+        params = inspect.signature(cls.__init__).parameters
+        return tuple(name for name in params if name != "self")
+
+
+def split_options(
+    task_class: type[Task], kwargs: dict[str, Any]
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Split an environment's keyword arguments into the task's own and the environment's,
+    the task's environment defaults filled in."""
+    own = set(task_class.option_names())
+    task_kwargs = {k: v for k, v in kwargs.items() if k in own}
+    env_kwargs = {**task_class.env_defaults, **{k: v for k, v in kwargs.items() if k not in own}}
+    return task_kwargs, env_kwargs

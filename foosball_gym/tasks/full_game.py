@@ -1,0 +1,49 @@
+"""The full game: four rods a side."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from foosball_gym import table as T
+from foosball_gym.interface.observations import check_flag
+from foosball_gym.interface.task import Layout
+from foosball_gym.tasks.base import Start, Task
+
+
+class FullGameTask(Task):
+    """All eight rods; a kick-off from a side wall. Success is scoring (in a continuous match:
+    being ahead)."""
+
+    options = {"opponent_prismatic_only": (False, True), "continuous": (False, True)}
+    env_defaults = {"stagnation_steps": 60}
+
+    def __init__(self, *, continuous: bool = False) -> None:
+        self.continuous = check_flag("continuous", continuous)
+        self.continues_after_goal = self.continuous
+        home = tuple(r.name for r in T.team_rods(T.HOME))
+        away = tuple(r.name for r in T.team_rods(T.AWAY))
+        self.layout = Layout(controlled=home, joints="both", opponent=away)
+
+    def sample_start(
+        self,
+        rng: np.random.Generator,
+        ball_position=None,
+        ball_velocity=None,
+        options: dict[str, Any] | None = None,
+    ) -> Start:
+        side = 1.0 if rng.random() < 0.5 else -1.0
+        position = (0.0, 0.3 * side)
+        vx = float(rng.uniform(0.25, 1.0)) * (1.0 if rng.random() < 0.5 else -1.0)
+        velocity = (vx, -side * float(rng.uniform(1.0, 2.0)))
+        if ball_position is not None:
+            position = ball_position
+        if ball_velocity is not None:
+            velocity = ball_velocity
+        return Start([0.0] * 8, [0.0] * 8, position, velocity)
+
+    def success(self, goals_for: int, goals_against: int) -> bool:
+        if self.continuous:
+            return goals_for > goals_against
+        return goals_for > 0

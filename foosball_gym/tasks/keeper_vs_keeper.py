@@ -1,0 +1,41 @@
+"""Keeper against keeper: the game the paper's real table plays."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from foosball_gym import table as T
+from foosball_gym.interface.task import Layout
+from foosball_gym.tasks.base import Start, Task
+from foosball_gym.tasks.serves import resting_in_front_of
+
+
+class KeeperVsKeeperTask(Task):
+    """The two keepers; the ball starts at rest in front of one. Success is scoring."""
+
+    options = {"opponent_prismatic_only": (True, False)}
+    # The real table's camera sees only where the opponent's rod is slid to; a ball lying
+    # still for a second is a draw.
+    env_defaults = {"opponent_prismatic_only": True, "stagnation_steps": 60}
+
+    def __init__(self) -> None:
+        self.layout = Layout(controlled=("home_keeper",), joints="both", opponent=("away_keeper",))
+
+    def sample_start(
+        self,
+        rng: np.random.Generator,
+        ball_position=None,
+        ball_velocity=None,
+        options: dict[str, Any] | None = None,
+    ) -> Start:
+        team = T.HOME if rng.random() < 0.5 else T.AWAY
+        position = resting_in_front_of(rng, team)
+        if ball_position is not None:
+            position = ball_position
+        velocity = (0.0, 0.0) if ball_velocity is None else ball_velocity
+        return Start([0.0, 0.0], [0.0, 0.0], position, velocity)
+
+    def success(self, goals_for: int, goals_against: int) -> bool:
+        return goals_for > 0

@@ -1,0 +1,99 @@
+"""Score: the home keeper puts the ball into the away goal, from rest or from a shot, with
+or without still obstacles in the way."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from foosball_gym import table as T
+from foosball_gym.interface.observations import check_flag
+from foosball_gym.interface.task import Layout
+from foosball_gym.policies.scripted import ScriptedTeam
+from foosball_gym.tasks.base import Start, Task
+from foosball_gym.tasks.serves import (
+    SHOT_SPEED_LIMITS,
+    check_choice,
+    check_range,
+    random_shot_start,
+    resting_in_front_of,
+    shot_at_goal,
+)
+
+BALL_STARTS = ("resting", "incoming")
+OBSTACLES = ("away_keeper", "away_defense", "away_offense")
+
+
+class ScoreTask(Task):
+    """A goal with the home keeper; success is scoring one."""
+
+    reset_options = ("ball_position", "ball_velocity", "obstacle_positions")
+    options = {"ball_start": BALL_STARTS, "obstacles": (False, True)}
+    # The authors' scoring tasks regularise the action.
+    env_defaults = {"action_regularisation_weight": 0.5}
+
+    def __init__(
+        self,
+        *,
+        ball_start: str = "resting",
+        obstacles: bool = False,
+        speed_range: tuple[float, float] = (3.0, 7.0),
+    ) -> None:
+        self.ball_start = check_choice("ball_start", ball_start, BALL_STARTS)
+        self.obstacles = check_flag("obstacles", obstacles)
+        self.speed_range = check_range("speed_range", speed_range, *SHOT_SPEED_LIMITS)
+        self.extras = OBSTACLES if self.obstacles else ()
+        self.layout = Layout(controlled=("home_keeper",), joints="both", static=self.extras)
+
+    def sample_start(
+        self,
+        rng: np.random.Generator,
+        ball_position=None,
+        ball_velocity=None,
+        options: dict[str, Any] | None = None,
+    ) -> Start:
+        options = options or {}
+        if self.ball_start == "resting":
+            position, velocity = resting_in_front_of(rng, T.HOME), (0.0, 0.0)
+        else:
+            position, velocity = random_shot_start(rng, self.speed_range)
+        if ball_position is not None:
+            position = ball_position
+            if self.ball_start == "incoming":
+                velocity = shot_at_goal(rng, position, self.speed_range, T.HOME)
+        if ball_velocity is not None:
+            velocity = ball_velocity
+        slide = [0.0]
+        if self.obstacles:
+            slide += self._obstacle_positions(rng, options.get("obstacle_positions"))
+        elif options.get("obstacle_positions") is not None:
+            raise ValueError("obstacle_positions needs obstacles=True")
+        return Start(slide, [0.0] * len(slide), position, velocity)
+
+    @staticmethod
+    def _obstacle_positions(rng: np.random.Generator, given: Any) -> list[float]:
+        rods = [T.rod(name) for name in OBSTACLES]
+        if given is None:
+            return [float(rng.uniform(-r.slide_limit, r.slide_limit)) for r in rods]
+        try:
+            values = [float(v) for v in given]
+        except (TypeError, ValueError):
+            values = []
+        if len(values) != len(rods) or not all(
+            abs(v) <= r.slide_limit for v, r in zip(values, rods)
+        ):
+            limits = ", ".join(f"{r.name} ±{r.slide_limit}" for r in rods)
+            raise ValueError(
+                f"obstacle_positions must be three prismatic values within ({limits}), "
+                f"got {given!r}"
+            )
+        return values
+
+    def scripted_policy(self, names: list[str]) -> ScriptedTeam:
+        """The scripted keeper, striking incoming balls (blocked ones trickle out of reach)
+        and aiming past the obstacles."""
+        return ScriptedTeam(names, self.layout.controlled, "both", volley=True, aim=True)
+
+    def success(self, goals_for: int, goals_against: int) -> bool:
+        return goals_for > 0
