@@ -747,11 +747,7 @@ def figurine_centres(
 ) -> np.ndarray:
     """World centres of the figurines of ``rods`` for given joint values, (N, 3)."""
     out = []
-    below = T.FIGURINE_CENTRE_BELOW_AXIS
     for rod, s, a in zip(rods, slide, spin):
-        d = rod.direction
-        # Positive spin swings the part below the axis towards the team's attacking side.
-        dx, dz = d * below * math.sin(a), -below * math.cos(a)
-        for off in rod.figurine_offsets:
-            out.append((rod.x + dx, d * (s + off), T.ROD_HEIGHT + dz))
+        x, z = rod.figurine_swing(a)
+        out += [(x, y, z) for y in rod.figurine_y(s)]
     return np.array(out, dtype=float).reshape(-1, 3)

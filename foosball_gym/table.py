@@ -197,6 +197,18 @@ class Rod:
         d = self.direction
         return tuple(d * (slide + off) for off in self.figurine_offsets)
 
+    def figurine_swing(self, spin: float) -> tuple[float, float]:
+        """World (x, z) of the figurines' centres at a revolute joint value.
+
+        Positive spin swings the part below the axis towards the team's attacking side.
+        """
+        below = FIGURINE_CENTRE_BELOW_AXIS
+        return self.x + self.direction * below * math.sin(spin), ROD_HEIGHT - below * math.cos(spin)
+
+    def figurine_vx(self, spin: float, spin_rate: float) -> float:
+        """World x velocity of the figurines' centres (the rate of :meth:`figurine_swing`)."""
+        return self.direction * FIGURINE_CENTRE_BELOW_AXIS * math.cos(spin) * spin_rate
+
 
 def _rod(team: str, role: str, x: float, offsets: tuple[float, ...], limit: float) -> Rod:
     return Rod(team=team, role=role, x=x, figurine_offsets=offsets, slide_limit=limit)

@@ -201,7 +201,20 @@ BELOW = {
         "foosball_gym.envs",
         "foosball_gym.simulator",
         "foosball_gym.sim_table",
+        "foosball_gym.tasks",
+        "foosball_gym.game",
     },
+    # A task is pure: what is played, not how it is simulated or shown.
+    "foosball_gym.tasks": {
+        "foosball_gym.envs",
+        "foosball_gym.simulator",
+        "foosball_gym.sim_table",
+        "foosball_gym.game",
+        "foosball_gym.training",
+    },
+    "foosball_gym.game": {"foosball_gym.envs", "foosball_gym.sim_table", "foosball_gym.training"},
+    # The simulated table plays the game itself; it never builds an environment.
+    "foosball_gym.sim_table": {"foosball_gym.envs", "foosball_gym.training"},
     "foosball_gym.estimation": {
         "foosball_gym.envs",
         "foosball_gym.simulator",
@@ -213,7 +226,12 @@ BELOW = {
         "foosball_gym.simulator",
         "foosball_gym.training",
     },
-    "foosball_gym.play": {"foosball_gym.envs", "foosball_gym.simulator", "foosball_gym.training"},
+    "foosball_gym.play": {
+        "foosball_gym.envs",
+        "foosball_gym.simulator",
+        "foosball_gym.game",
+        "foosball_gym.training",
+    },
     "foosball_gym.policies": {
         "foosball_gym.envs",
         "foosball_gym.simulator",

@@ -16,7 +16,6 @@ figurines' world coordinates change sign), which is what an opponent policy acts
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from operator import itemgetter
@@ -224,14 +223,14 @@ class ObservationBuilder:
         n = self._n
         for start, rod_idx, y_only, velocities in self._figurine_blocks:
             values, rates = [], []
+            sign = self._sign
             for k, rod in rod_idx:
-                d = rod.direction * self._sign
                 s, a, sv, av = pos[k], pos[n + k], vel[k], vel[n + k]
-                r = T.FIGURINE_CENTRE_BELOW_AXIS
-                x, vx = self._sign * rod.x + d * r * math.sin(a), d * r * math.cos(a) * av
-                for off in rod.figurine_offsets:
-                    values += [d * (s + off)] if y_only else [x, d * (s + off)]
-                    rates += [d * sv] if y_only else [vx, d * sv]
+                x, vx = sign * rod.figurine_swing(a)[0], sign * rod.figurine_vx(a, av)
+                vy = sign * rod.direction * sv
+                for y in rod.figurine_y(s):
+                    values += [sign * y] if y_only else [x, sign * y]
+                    rates += [vy] if y_only else [vx, vy]
             block = values + (rates if velocities else [])
             out[start : start + len(block)] = block
         return out
