@@ -172,14 +172,25 @@ class Game:
 
     # ------------------------------------------------------------------ playing
 
-    def command(self, action: Sequence[float]) -> None:
+    def command(
+        self, action: Sequence[float], opponent_action: Sequence[float] | None = None
+    ) -> None:
         """Drive the learner's joints with a checked action in [-1, 1] and the opponent's with
-        its policy's choice."""
+        its policy's choice.
+
+        Args:
+            action: the learner's action.
+            opponent_action: a checked action for the away rods, in the away side's own frame,
+                played instead of asking the opponent policy (where both sides learn).
+        """
         targets = self.targets
         for i, s, a in zip(self._own, self._own_scale, action):
             targets[i] = a * s
+        if opponent_action is not None and self._opponent is None:
+            raise ValueError(f"{type(self.task).__name__} has no opponent to command")
         if self._opponent is not None:
-            for i, s, a in zip(self._opp, self._opp_scale, self._opponent_action()):
+            away = self._opponent_action() if opponent_action is None else opponent_action
+            for i, s, a in zip(self._opp, self._opp_scale, away):
                 targets[i] = a * s
         self.sim.command("position", targets)
 
