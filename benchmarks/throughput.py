@@ -3,13 +3,21 @@
 Resets are included; the opponent of two-player envs (the default scripted one) is included.
 Physics steps per second count every physics step the simulator took (finer near contacts).
 
-    python benchmarks/throughput.py [--steps N] [--env ID ...]
+    python benchmarks/throughput.py [--steps N] [--env ID ...] [--against DIR [--rounds R]]
+
+``--against DIR`` measures the package in another checkout too (e.g. a ``git worktree`` of the
+commit before a change), alternating the two in fresh processes round by round, and prints the
+median of each and their ratio: a before/after comparison taken in one run on one machine.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import statistics
+import subprocess
+import sys
 import time
 
 import gymnasium as gym
@@ -38,6 +46,37 @@ def measure(env_id: str, steps: int, seed: int = 0, **kwargs) -> tuple[float, fl
     return rate, rate * physics_per_step, resets
 
 
+def _measure_in(checkout: str, env_id: str, steps: int) -> float:
+    """Env steps/s of ``env_id`` with the package of ``checkout``, in a fresh process."""
+    code = (
+        "import json, sys; sys.path.insert(0, sys.argv[1]); sys.path.insert(1, sys.argv[2]);"
+        "import throughput; throughput.measure(sys.argv[3], 500);"
+        "print(json.dumps(throughput.measure(sys.argv[3], int(sys.argv[4]))[0]))"
+    )
+    here = os.path.dirname(os.path.abspath(__file__))
+    out = subprocess.run(
+        [sys.executable, "-c", code, checkout, here, env_id, str(steps)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return float(json.loads(out.stdout.strip().splitlines()[-1]))
+
+
+def compare(against: str, envs: list[str], steps: int, rounds: int) -> None:
+    this = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    print(f"this: {this}\nagainst: {os.path.abspath(against)}")
+    print(f"{'environment':32s} {'against /s':>11s} {'this /s':>11s} {'this/against':>13s}")
+    for env_id in envs:
+        rates: dict[str, list[float]] = {"against": [], "this": []}
+        for r in range(rounds):
+            order = [("against", against), ("this", this)]
+            for name, checkout in order if r % 2 == 0 else order[::-1]:
+                rates[name].append(_measure_in(checkout, env_id, steps))
+        a, t = statistics.median(rates["against"]), statistics.median(rates["this"])
+        print(f"{env_id:32s} {a:11,.0f} {t:11,.0f} {t / a:13.3f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=20000, help="env steps per environment")
@@ -47,9 +86,14 @@ def main() -> None:
         default=list(foosball_gym.ENV_IDS),
         help="environment ids (default: all registered)",
     )
+    parser.add_argument("--against", metavar="DIR", help="another checkout to compare with")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of --against (3)")
     args = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core
+    if args.against:
+        compare(args.against, args.env, args.steps, args.rounds)
+        return
     print(f"{'environment':32s} {'env steps/s':>12s} {'physics steps/s':>16s} {'resets':>7s}")
     for env_id in args.env:
         measure(env_id, min(args.steps, 500))  # warm-up: imports, URDF cache

@@ -337,3 +337,19 @@ sys.exit(main(sys.argv[1:]))
     assert done.returncode == 2, done.stderr
     assert done.stderr.startswith("foosball eval: error:"), done.stderr
     assert "foosball_gym[train]" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_every_package_is_listed_for_installation():
+    """A package missing from setup.cfg works in an editable install and is absent from a
+    real one."""
+    import configparser
+
+    config = configparser.ConfigParser()
+    config.read(PACKAGE.parent / "setup.cfg")
+    listed = set(config["options"]["packages"].split())
+    found = {
+        ".".join(("foosball_gym", *path.parent.relative_to(PACKAGE).parts))
+        for path in PACKAGE.rglob("__init__.py")
+    }
+    assert "foosball_gym.tasks" in found
+    assert found - listed == set()
