@@ -112,6 +112,7 @@ def _urdf_with_rods(rod_names: tuple[str, ...]) -> str:
             owner = rod_of(el.get("name", ""))
             if owner is not None and owner not in keep:
                 robot.remove(el)
+    _merge_fixed_links(robot)
     # The copy lives elsewhere, so the meshes it names are given by their full path.
     for mesh in robot.iter("mesh"):
         mesh.set("filename", str(urdf_path(mesh.get("filename", ""))))
@@ -125,6 +126,50 @@ def _urdf_with_rods(rod_names: tuple[str, ...]) -> str:
             f.write(text)
         os.replace(tmp, path)
     return str(path)
+
+
+def _merge_fixed_links(robot: ET.Element) -> None:
+    """Fold every link on a fixed joint (the figurines) into its parent (the rod).
+
+    This is what Bullet's ``URDF_MERGE_FIXED_LINKS`` does, done before loading because that
+    flag leaks about 100 kB of Bullet's memory per load. The order Bullet merges in (a
+    parent's first child, then the others last to first) and the way it sums the centre of
+    mass are kept, so the table is the same to the last bit.
+    """
+    links = {link.get("name"): link for link in robot.findall("link")}
+    children: dict[str, list[ET.Element]] = {}
+    for joint in robot.findall("joint"):
+        if joint.get("type") == "fixed":
+            children.setdefault(joint.find("parent").get("link"), []).append(joint)
+    for parent_name, joints in children.items():
+        parent = links[parent_name]
+        inertial = parent.find("inertial")
+        mass = float(inertial.find("mass").get("value"))
+        com = [float(v) for v in inertial.find("origin").get("xyz").split()]
+        for joint in joints[:1] + joints[:0:-1]:
+            child = links[joint.find("child").get("link")]
+            offset = [float(v) for v in joint.find("origin").get("xyz").split()]
+            if any(float(v) for v in joint.find("origin").get("rpy", "0 0 0").split()):
+                raise ValueError(f"fixed joint {joint.get('name')} is turned; not merged")
+            child_inertial = child.find("inertial")
+            child_mass = float(child_inertial.find("mass").get("value"))
+            child_com = [
+                float(v) + o
+                for v, o in zip(child_inertial.find("origin").get("xyz").split(), offset)
+            ]
+            total = mass + child_mass
+            com = [(mass * a + child_mass * b) * (1 / total) for a, b in zip(com, child_com)]
+            mass = total
+            for element in child:
+                if element.tag in ("visual", "collision"):
+                    origin = element.find("origin")
+                    xyz = [float(v) for v in origin.get("xyz").split()]
+                    origin.set("xyz", " ".join(repr(v + o) for v, o in zip(xyz, offset)))
+                    parent.append(element)
+            robot.remove(child)
+            robot.remove(joint)
+        inertial.find("mass").set("value", repr(mass))
+        inertial.find("origin").set("xyz", " ".join(repr(v) for v in com))
 
 
 @dataclass
@@ -272,9 +317,7 @@ class TableSim:
             self._p.configureDebugVisualizer(pybullet.COV_ENABLE_GUI, 0)
             self._p.resetDebugVisualizerCamera(1.1, 0, -89.9, [0, 0, 0])
         with _quiet_stdout():
-            self.body = self._p.loadURDF(
-                _urdf_with_rods(names), useFixedBase=True, flags=pybullet.URDF_MERGE_FIXED_LINKS
-            )
+            self.body = self._p.loadURDF(_urdf_with_rods(names), useFixedBase=True)
         joint_index = {}
         for i in range(self._p.getNumJoints(self.body)):
             info = self._p.getJointInfo(self.body, i)
@@ -695,6 +738,23 @@ class TableSim:
         """Ball x, y, vx, vy: the four ball numbers every observation holds."""
         x, y, _, vx, vy, _ = self._ball()
         return x, y, vx, vy
+
+    def scene(self) -> tuple[list[float], list[float]]:
+        """What a picture of the table shows: joint positions (slides, then spins) and the
+        ball's x, y, z. :meth:`show` puts another table into it."""
+        x, y, z, _, _, _ = self._ball()
+        return list(self._joints()[0]), [x, y, z]
+
+    def show(self, positions: Sequence[float], ball: Sequence[float]) -> None:
+        """Pose the rods and the ball as :meth:`scene` gave them, at rest, for rendering."""
+        if len(positions) != len(self._joint_idx) or len(ball) != 3:
+            raise ValueError(
+                f"show needs {len(self._joint_idx)} joint positions and the ball's x, y, z"
+            )
+        for idx, value in zip(self._joint_idx, positions):
+            self._p.resetJointState(self.body, idx, float(value), 0.0)
+        self._p.resetBasePositionAndOrientation(self.ball, [float(v) for v in ball], [0, 0, 0, 1])
+        self._ball_cache = self._joint_cache = None
 
     def figurine_positions(self) -> np.ndarray:
         """World centres of every figurine on the rods in play, (N, 3), rod by rod."""
