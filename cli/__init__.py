@@ -1,4 +1,4 @@
-"""The ``foosball`` command: train, eval, play, calibrate, envs.
+"""The ``foosball`` command: train, eval, play, calibrate, envs, migrate.
 
 One module per command, each a thin layer over library functions with ``add_parser`` (its
 options) and ``run`` (parsed options to an exit code); this one assembles the parser and turns
@@ -14,11 +14,11 @@ import argparse
 from collections.abc import Sequence
 
 import foosball_gym
-from foosball_gym.cli import calibrate, envs, evaluate, play, train
+from foosball_gym.cli import calibrate, envs, evaluate, migrate, play, train
 from foosball_gym.cli.common import CliError
 
 # In the order ``foosball --help`` lists them.
-COMMANDS = (train, evaluate, play, calibrate, envs)
+COMMANDS = (train, evaluate, play, calibrate, envs, migrate)
 
 __all__ = ["CliError", "build_parser", "main"]
 
@@ -39,7 +39,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     Returns:
         The exit code: 0, or 1 where the safety layer stopped a real table. A bad argument or
-        input exits with 2 and one line naming it; Ctrl-C with 130.
+        input exits with 2 and one line naming it; Ctrl-C with 130 (``train`` writes a
+        checkpoint first, and exits 143 on SIGTERM).
     """
     parser = build_parser()
     args = parser.parse_args(argv)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import glob
+from pathlib import Path
 from typing import Any
 
 from foosball_gym.cli.common import CliError, LibraryDefault, given, grid, show_size
@@ -44,6 +45,10 @@ def add_parser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if not Path(args.table).is_file():
+        raise CliError(f"argument --table: no table configuration at {args.table}")
+    if args.frame and not Path(args.frame).is_file():
+        raise CliError(f"argument --frame: no image at {args.frame}")
     try:
         import cv2
 

@@ -6,7 +6,11 @@ import argparse
 import ast
 import importlib
 import inspect
+import math
+import os
+import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 
@@ -59,11 +63,22 @@ def parse_env_kwargs(items: Sequence[str] | None) -> dict[str, Any]:
             out[key] = ast.literal_eval(raw)
         except (ValueError, SyntaxError):
             out[key] = raw
+    if out.get("render_mode") == "human" and not _has_display():
+        raise CliError(
+            "--env-kwarg render_mode=human needs a display and DISPLAY is not set; "
+            "run under xvfb-run, or use render_mode=rgb_array"
+        )
     return out
 
 
+def _has_display() -> bool:
+    # PyBullet's GUI is an X11 window on Linux; elsewhere the system provides one.
+    return not sys.platform.startswith("linux") or bool(os.environ.get("DISPLAY"))
+
+
 def add_env_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--env`` and ``--env-kwarg``, for the commands that take a model or the scripted one."""
+    """``--env``, ``--env-kwarg`` and ``--trust-model``, for the commands that take a model or
+    the scripted one."""
     parser.add_argument("--env", help="environment id, where the model does not say it")
     parser.add_argument(
         "--env-kwarg",
@@ -71,6 +86,41 @@ def add_env_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="KEY=VALUE",
         help="an environment option (repeatable)",
     )
+    add_trust_argument(parser)
+
+
+def add_trust_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--trust-model",
+        action="store_true",
+        help="also read model files stored with pickle (runs from before plain files), which "
+        "can run any code: only for files from a source you trust",
+    )
+
+
+def check_writable(option: str, path: str) -> None:
+    """Fail before long work, not after it, where ``option``'s file cannot be written."""
+    target = Path(path)
+    if target.is_dir():
+        raise CliError(f"{option} {path} is a directory; give a file name")
+    if not target.parent.is_dir():
+        raise CliError(f"{option} {path}: there is no folder {target.parent}")
+    # Asked of the file system, not tried: a file created now would be left empty if the
+    # work stopped.
+    if not os.access(target if target.exists() else target.parent, os.W_OK):
+        raise CliError(f"{option} {path} cannot be written: permission denied")
+
+
+def check_directory(option: str, path: str | Path) -> None:
+    """Fail where ``option``'s directory can be neither used nor created, without creating it."""
+    target = Path(path)
+    existing = target
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise CliError(f"{option} {path}: {existing} is a file, not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise CliError(f"{option} {path} cannot be written: permission denied")
 
 
 def positive_int(text: str) -> int:
@@ -80,6 +130,39 @@ def positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def seed(text: str) -> int:
+    """A seed: a whole number, 0 or more (NumPy's generators take no negative ones)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
+
+
+def seconds(text: str) -> float:
+    """A duration in seconds: a finite number, 0 or more."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not 0 <= value < math.inf:
+        raise argparse.ArgumentTypeError(f"must be a finite number, 0 or more, got {text!r}")
+    return value
+
+
+def positive_number(text: str) -> float:
+    """A finite number above 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0 < value < math.inf:
+        raise argparse.ArgumentTypeError(f"must be a finite number above 0, got {text!r}")
     return value
 
 
@@ -122,15 +205,26 @@ def scripted(env_id: str, env_kwargs: dict[str, Any]) -> Any:
         raise CliError(str(err)) from None
 
 
-def load_model(spec: str) -> Any:
+def load_model(spec: str, trust: bool = False) -> Any:
     """A trained policy (:class:`~foosball_gym.training.models.LoadedPolicy`) from a run
-    directory, a model zip or ``builtin:NAME``."""
+    directory, a model zip or ``builtin:NAME``; pickled files only with ``trust``."""
     from foosball_gym.training import require_train_extra
 
     require_train_extra()
     from foosball_gym.training.models import ModelLoadError, load_policy
 
     try:
-        return load_policy(spec)
+        return load_policy(spec, trust=trust)
     except ModelLoadError as err:
+        raise CliError(str(err)) from None
+
+
+def check_model_fits(loaded: Any, env_id: str, env_kwargs: dict[str, Any]) -> None:
+    """Fail where a loaded model's observations are not those of the environment it is to play."""
+    from foosball_gym.catalog import check_env_id
+
+    try:
+        check_env_id(env_id)
+        loaded.check_env(env_id, env_kwargs)
+    except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None

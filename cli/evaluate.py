@@ -9,17 +9,18 @@ from __future__ import annotations
 import argparse
 import inspect
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 from foosball_gym.cli.common import (
     CliError,
     add_env_arguments,
+    check_writable,
     load_model,
     parse_env_kwargs,
     positive_int,
     scripted,
+    seed,
 )
 from foosball_gym.evaluation import evaluate
 
@@ -46,7 +47,7 @@ def add_parser(subparsers: Any) -> None:
         help="seeded episodes (%(default)s)",
     )
     p.add_argument(
-        "--seed", type=int, default=defaults["seed"].default, help="first episode's seed"
+        "--seed", type=seed, default=defaults["seed"].default, help="first episode's seed"
     )
     p.add_argument(
         "--opponent",
@@ -62,13 +63,15 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.json is not None:
-        _check_writable(args.json)
+        check_writable("--json", args.json)
+    if args.video is not None:
+        check_writable("--video", args.video)
     env_kwargs = parse_env_kwargs(args.env_kwarg)
     if args.policy == "scripted":
         env_id = args.target
         policy, name = scripted(env_id, env_kwargs), "scripted"
     else:
-        loaded = load_model(args.target)
+        loaded = load_model(args.target, args.trust_model)
         env_id = args.env or loaded.env_id
         if env_id is None:
             raise CliError(
@@ -81,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
         if args.opponent == "scripted":
             opponent_name = "scripted"
         else:
-            opponent, opponent_name = load_model(args.opponent).policy, args.opponent
+            opponent = load_model(args.opponent, args.trust_model).policy
+            opponent_name = args.opponent
     try:
         result = evaluate(
             policy,
@@ -96,6 +100,8 @@ def run(args: argparse.Namespace) -> int:
         )
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None
+    except OSError as err:  # the video cannot be written after all
+        raise CliError(f"--video {args.video}: {err}") from None
     print(result.table())
     written = [path for path in (args.json, args.video) if path]
     if args.json:
@@ -103,16 +109,3 @@ def run(args: argparse.Namespace) -> int:
     if written:
         print("wrote " + " and ".join(written))
     return 0
-
-
-def _check_writable(path: str) -> None:
-    """Fail before a long evaluation, not after it, where its results cannot be written."""
-    target = Path(path)
-    if target.is_dir():
-        raise CliError(f"--json {path} is a directory; give a file name")
-    if not target.parent.is_dir():
-        raise CliError(f"--json {path}: the folder {target.parent} does not exist")
-    # Asked of the file system, not tried: a file created now would be left empty if the
-    # evaluation stopped.
-    if not os.access(target if target.exists() else target.parent, os.W_OK):
-        raise CliError(f"--json {path} cannot be written: permission denied")

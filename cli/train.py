@@ -8,13 +8,22 @@ the default is written down once, in the library.
 from __future__ import annotations
 
 import argparse
+import shlex
+import signal
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.cli.common import CliError, parse_env_kwargs, positive_int
+from foosball_gym.cli.common import (
+    CliError,
+    check_directory,
+    parse_env_kwargs,
+    positive_int,
+    positive_number,
+    seed,
+)
 from foosball_gym.training.config import ALGORITHMS, LR_SCHEDULES, VEC_ENV_KINDS, TrainConfig
-from foosball_gym.training.files import CONFIG_FILE
+from foosball_gym.training.files import CONFIG_FILE, has_checkpoint
 
 # The TrainConfig fields offered as options (n_envs as --n-envs), with how the command line
 # spells their values.
@@ -22,11 +31,11 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "algo": {"choices": ALGORITHMS},
     "timesteps": {"type": positive_int},
     "n_envs": {"type": positive_int},
-    "seed": {"type": int},
+    "seed": {"type": seed},
     "vec_env": {"choices": VEC_ENV_KINDS},
     "n_steps": {"type": positive_int},
     "batch_size": {"type": positive_int},
-    "learning_rate": {"type": float},
+    "learning_rate": {"type": positive_number},
     "lr_schedule": {"choices": LR_SCHEDULES},
     "pretrain_episodes": {"type": int, "metavar": "N"},
     "target_kl": {"type": float},
@@ -128,16 +137,33 @@ def run(args: argparse.Namespace) -> int:
         out = Path(args.resume)
         if not (out / CONFIG_FILE).exists():
             raise CliError(f"--resume {out}: no run there ({CONFIG_FILE} is missing)")
-        config = TrainConfig.load(out / CONFIG_FILE)
+        try:
+            config = TrainConfig.load(out / CONFIG_FILE)
+        except (ValueError, TypeError) as err:  # JSONDecodeError is a ValueError
+            raise CliError(f"--resume {out}: {out / CONFIG_FILE} is not a run's: {err}") from None
+        if not has_checkpoint(out):
+            print(f"{out} has no checkpoint yet: starting the run over from its {CONFIG_FILE}")
     else:
         if not args.env_id:
             raise CliError("give an environment id (see `foosball envs`) or --resume DIR")
         config = config_from_args(args)
         out = Path(args.out or f"runs/{config.env_id}-seed{config.seed}")
+        check_directory("--out", out)
     try:
         result = train(config, out, progress_bar=not args.no_progress, resume=bool(args.resume))
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None
+    except OSError as err:
+        if err.filename is None:  # not the file system's: no argument to blame
+            raise
+        raise CliError(f"--out {out}: cannot write {err.filename}: {err.strerror}") from None
+    if result.signal is not None:
+        name = signal.Signals(result.signal).name
+        print(
+            f"stopped by {name} after {result.timesteps} steps; checkpoint written. Continue with: "
+            f"foosball train --resume {shlex.quote(str(result.out))}"
+        )
+        return 128 + result.signal
     print(f"trained {result.timesteps} steps in {result.seconds:.0f} s; run in {result.out}")
     if result.reached:
         print(

@@ -3,22 +3,24 @@
 Importing the package registers the environment ids listed in :data:`ENV_IDS`.
 """
 
-from gymnasium.envs.registration import register, registry
+from __future__ import annotations
 
-__version__ = "0.1.0"
+from typing import Any
 
-# id, entry point, max_episode_steps (60 Hz control steps)
-_ENVS = (
-    ("Foosball-Block-v0", "foosball_gym.envs.block:BlockEnv", 90),
-    ("Foosball-Score-v0", "foosball_gym.envs.score:ScoreEnv", 180),
-    ("Foosball-KeeperVsKeeper-v0", "foosball_gym.envs.keeper_vs_keeper:KeeperVsKeeperEnv", 1800),
-    ("Foosball-FullGame-v0", "foosball_gym.envs.full_game:FullGameEnv", 3600),
-)
+from foosball_gym.registration import ENV_IDS, __version__, register_envs
 
-ENV_IDS: tuple[str, ...] = tuple(env_id for env_id, _, _ in _ENVS)
+register_envs()
 
-for _id, _entry, _steps in _ENVS:
-    if _id not in registry:
-        register(id=_id, entry_point=_entry, max_episode_steps=_steps)
 
-__all__ = ["ENV_IDS", "__version__"]
+def load_policy(spec: Any, trust: bool = False) -> Any:
+    """A trained policy, ready to act: ``policy(obs) -> action`` with its normalisation.
+
+    ``spec`` is a run directory, a model ``.zip`` or ``builtin:NAME``; see
+    :func:`foosball_gym.training.models.load_policy` (the ``train`` extra), which this calls.
+    """
+    from foosball_gym.training.models import load_policy as load
+
+    return load(spec, trust=trust)
+
+
+__all__ = ["ENV_IDS", "__version__", "load_policy"]

@@ -7,13 +7,13 @@ from typing import Any
 
 import gymnasium as gym
 
-import foosball_gym
+from foosball_gym.registration import ENV_IDS
 
 
 def check_env_id(env_id: str) -> None:
     """Raise ValueError naming the registered ids where ``env_id`` is not one of them."""
     if env_id not in gym.registry:
-        known = ", ".join(foosball_gym.ENV_IDS)
+        known = ", ".join(ENV_IDS)
         raise ValueError(f"unknown environment {env_id!r}; registered: {known}")
 
 
@@ -33,7 +33,7 @@ def scripted_policy(env_id: str, env_kwargs: dict[str, Any] | None = None) -> An
 def describe_envs() -> str:
     """Every registered environment with its spaces and its options' defaults and values."""
     lines = []
-    for env_id in foosball_gym.ENV_IDS:
+    for env_id in ENV_IDS:
         spec = gym.spec(env_id)
         env = gym.make(env_id)
         cls = type(env.unwrapped)

@@ -94,8 +94,9 @@ def evaluate(
         video: write the first episode, rendered, to this .mp4 file.
 
     Raises:
-        ValueError: ``episodes`` is below 1, ``env_id`` is not registered, or an option has a
-            bad value (TypeError where the environment has no such option).
+        ValueError: ``episodes`` is below 1, ``env_id`` is not registered, an option has a
+            bad value (TypeError where the environment has no such option), or a policy that
+            says the size of the observations it takes (``observation_size``) takes others.
     """
     if episodes < 1:
         raise ValueError(f"episodes must be at least 1, got {episodes}")
@@ -104,6 +105,13 @@ def evaluate(
     if video is not None:
         kwargs.update(render_mode="rgb_array", render_width=640, render_height=360)
     env = gym.make(env_id, **kwargs)
+    try:
+        _check_fits(policy, policy_name, env_id, env)
+        if opponent is not None:
+            _check_fits(opponent, opponent_name or "opponent", env_id, env)
+    except ValueError:
+        env.close()
+        raise
     if opponent is not None:
         env.unwrapped.set_opponent(opponent)
     rewards, lengths = [], []
@@ -158,6 +166,18 @@ def evaluate(
         std_reward=float(np.std(rewards)),
         mean_length=float(np.mean(lengths)),
     )
+
+
+def _check_fits(policy: Policy, name: str, env_id: str, env: gym.Env) -> None:
+    expected = getattr(policy, "observation_size", None)
+    size = int(np.prod(env.observation_space.shape))
+    if expected is not None and expected != size:
+        trained = getattr(policy, "env_id", None)
+        of = f" of {trained}" if trained else ""
+        raise ValueError(
+            f"{name} expects observations of size {expected}{of}, but {env_id} gives {size}: "
+            f"give a model trained on {env_id}"
+        )
 
 
 class _VideoWriter:

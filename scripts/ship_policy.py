@@ -14,7 +14,7 @@ import shutil
 from pathlib import Path
 
 BUILTIN = Path(__file__).resolve().parents[1] / "foosball_gym" / "builtin"
-FILES = ("model.zip", "vecnormalize.pkl", "config.json", "eval.csv", "eval.png")
+FILES = ("model.zip", "vecnormalize.json", "config.json", "eval.csv", "eval.png")
 
 
 def main() -> None:

@@ -73,3 +73,18 @@ def test_cli_evaluates_a_builtin_policy_by_name(tmp_path, capsys):
     out = tmp_path / "eval.json"
     assert main(["eval", "builtin:score-resting", "--episodes", "5", "--json", str(out)]) == 0
     assert "Foosball-Score-v0" in capsys.readouterr().out
+
+
+def test_load_policy_is_offered_by_the_package_itself():
+    import numpy as np
+
+    import foosball_gym
+
+    policy = foosball_gym.load_policy("builtin:block")
+    env = gym.make(policy.env_id)
+    obs, _ = env.reset(seed=0)
+    action = np.asarray(policy(obs))
+    assert action.shape == env.action_space.shape and env.action_space.contains(
+        action.astype(np.float32)
+    )
+    env.close()

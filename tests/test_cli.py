@@ -30,6 +30,7 @@ MAIN_OPTIONS = {
     "play": ["model", "--table", "--env", "--episodes", "--camera", "--latency", "--log"],
     "calibrate": ["--table", "--frame", "--chessboard", "--pattern", "--square", "--home-side"],
     "envs": ["registered environments"],
+    "migrate": ["RUN", "--trust-model"],
 }
 
 
@@ -126,10 +127,9 @@ def config_of(parser, argv):
             "the scripted policy needs --env ENV_ID",
             marks=needs_hardware,
         ),
-        pytest.param(
+        (
             ["calibrate", "--table", "missing.yaml"],
-            "No such file or directory: 'missing.yaml'",
-            marks=needs_hardware,
+            "argument --table: no table configuration at missing.yaml",
         ),
         (
             ["calibrate", "--table", "table.yaml", "--pattern", "9by6"],
@@ -146,12 +146,74 @@ def config_of(parser, argv):
         (["train", "Foosball-Block-v0", "--timesteps", "0"], "at least 1"),
         pytest.param(["train", "--resume", "/nonexistent/run"], "no run there", marks=needs_train),
         pytest.param(["eval", "builtin:nothing"], "no built-in policy", marks=needs_train),
+        (["train", "Foosball-Block-v0", "--seed", "-1"], "argument --seed: must be 0 or more"),
+        (
+            ["eval", "--policy", "scripted", "Foosball-Block-v0", "--seed", "-1"],
+            "argument --seed: must be 0 or more",
+        ),
+        (
+            ["play", "scripted", "--env", "Foosball-Block-v0", "--table", "sim", "--seed", "-1"],
+            "argument --seed: must be 0 or more",
+        ),
+        (
+            [
+                "play",
+                "scripted",
+                "--env",
+                "Foosball-Block-v0",
+                "--table",
+                "sim",
+                "--latency",
+                "nan",
+            ],
+            "argument --latency: must be a finite number, 0 or more, got 'nan'",
+        ),
+        (
+            ["train", "Foosball-Block-v0", "--learning-rate", "-1"],
+            "argument --learning-rate: must be a finite number above 0",
+        ),
+        pytest.param(
+            ["train", "Foosball-Block-v0", "--out", "/dev/null/run", "--no-progress"],
+            "--out /dev/null/run: /dev/null is a file, not a folder",
+            marks=needs_train,
+        ),
+        (
+            ["eval", "--policy", "scripted", "Foosball-Block-v0", "--json", "/dev/null/r.json"],
+            "--json /dev/null/r.json: there is no folder /dev/null",
+        ),
+        (
+            ["eval", "--policy", "scripted", "Foosball-Block-v0", "--video", "/dev/null/v.mp4"],
+            "--video /dev/null/v.mp4: there is no folder /dev/null",
+        ),
+        (
+            [
+                "eval",
+                "--policy",
+                "scripted",
+                "Foosball-Block-v0",
+                "--env-kwarg",
+                "render_mode=human",
+            ],
+            "render_mode=human needs a display",
+        ),
+        pytest.param(
+            ["eval", "builtin:block", "--env", "Foosball-Score-v0"],
+            "expects observations of size 6 of Foosball-Block-v0, but Foosball-Score-v0 gives 8",
+            marks=needs_train,
+        ),
+        pytest.param(
+            ["play", "builtin:block", "--env", "Foosball-Score-v0", "--table", "sim"],
+            "expects observations of size 6 of Foosball-Block-v0, but Foosball-Score-v0 gives 8",
+            marks=[needs_train, needs_hardware],
+        ),
+        pytest.param(["migrate", "/nonexistent/run"], "--trust-model", marks=needs_train),
     ],
 )
 def test_a_bad_input_exits_with_status_2_and_one_line_naming_it(
     argv, message, capsys, tmp_path, monkeypatch
 ):
     monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("DISPLAY", raising=False)
     with pytest.raises(SystemExit) as exit_info:
         main(argv)
     assert exit_info.value.code == 2
@@ -223,6 +285,52 @@ def test_eval_refuses_a_json_path_it_cannot_write_before_evaluating(
     assert "--json" in capsys.readouterr().err
 
 
+@needs_train
+@pytest.mark.parametrize("where", ["run", "config"])
+def test_a_run_naming_an_unknown_environment_exits_with_status_2(tmp_path, where, capsys):
+    import shutil
+
+    from foosball_gym.training.models import builtin_path
+
+    run = tmp_path / "run"
+    shutil.copytree(builtin_path("block"), run)
+    config = json.loads((run / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps({**config, "env_id": "Foosball-Nothing-v0"}))
+    argv = ["eval", str(run)] if where == "run" else ["train", "--resume", str(run)]
+    with pytest.raises(SystemExit) as exit_info:
+        main([*argv, "--no-progress"] if where == "config" else argv)
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert "unknown environment 'Foosball-Nothing-v0'" in err and "Traceback" not in err
+
+
+@needs_hardware
+@pytest.mark.parametrize(
+    "field, value, allowed",
+    [
+        ("watchdog_s", 10, "at most 0.1 s"),
+        ("heartbeat_timeout_s", 60, "at most 0.5 s"),
+        ("control_hz", 30, "40 to 1000 Hz"),
+    ],
+)
+def test_play_refuses_a_table_configuration_outside_the_safe_limits(
+    tmp_path, field, value, allowed, capsys
+):
+    import yaml
+
+    from foosball_gym.hardware.config import shipped_table
+
+    data = yaml.safe_load(shipped_table().read_text())
+    data[field] = value
+    path = tmp_path / "table.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(SystemExit) as exit_info:
+        main(["play", "scripted", "--env", "Foosball-Block-v0", "--table", str(path)])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert field in err and allowed in err and "Traceback" not in err
+
+
 def test_envs_lists_every_environment_with_its_options(capsys):
     assert main(["envs"]) == 0
     out = capsys.readouterr().out
@@ -243,12 +351,13 @@ def test_play_runs_the_scripted_keeper_on_the_simulated_table(capsys):
 
 @needs_hardware
 def test_play_and_calibrate_help_show_the_library_defaults(capsys):
-    from foosball_gym.play.stack import calibrate_table, play_sim
+    from foosball_gym.play.stack import LOCKSTEP_CAMERA, REALTIME_CAMERA, calibrate_table
 
     with pytest.raises(SystemExit):
         main(["play", "--help"])
-    width, height = play_sim.__defaults__[-1]
-    assert f"({width}x{height})" in capsys.readouterr().out
+    out = " ".join(capsys.readouterr().out.split())
+    (w, h), (lw, lh) = REALTIME_CAMERA, LOCKSTEP_CAMERA
+    assert f"({w}x{h}; {lw}x{lh} with --lockstep)" in out
     with pytest.raises(SystemExit):
         main(["calibrate", "--help"])
     pattern, square, home_side = calibrate_table.__defaults__[-3:]

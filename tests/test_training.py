@@ -3,6 +3,13 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +18,7 @@ pytest.importorskip("stable_baselines3")
 
 from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 
+import foosball_gym  # noqa: E402
 from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.evaluation import evaluate, wilson_interval  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
@@ -53,7 +61,7 @@ def test_cli_trains_block_and_the_result_evaluates_through_the_cli(tmp_path, cap
     for name in (
         "model.zip",
         "config.json",
-        "vecnormalize.pkl",
+        "vecnormalize.json",
         "eval.csv",
         "eval.png",
         "checkpoints/latest.json",
@@ -238,3 +246,79 @@ def test_pretraining_clones_the_scripted_keeper(tmp_path):
     result = evaluate(clone, "Foosball-Block-v0", episodes=40, seed=500)
     zero = evaluate(lambda obs: np.zeros(1, np.float32), "Foosball-Block-v0", episodes=40, seed=500)
     assert result.success_rate >= zero.success_rate + 0.25
+
+
+def start_training(argv: list[str], cwd) -> subprocess.Popen:
+    """``foosball train`` in its own process group, as a terminal runs it."""
+    env = {**os.environ, "PYTHONPATH": str(Path(foosball_gym.__file__).resolve().parents[1])}
+    return subprocess.Popen(
+        [sys.executable, "-m", "foosball_gym.cli", "train", *argv],
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+
+
+def interrupt_once_stepping(proc: subprocess.Popen, run: Path, tb_runs: int) -> tuple[str, str]:
+    """Ctrl-C to the whole process group once PPO logged its first update of this start."""
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and proc.poll() is None:
+        logs = sorted((run / "tb").glob("run_*/events.out.tfevents.*"))
+        # A log file exists from the start of learning; it grows with each update's figures.
+        if len(logs) >= tb_runs and logs[-1].stat().st_size > 200:
+            break
+        time.sleep(0.2)
+    assert proc.poll() is None, proc.communicate()
+    os.killpg(proc.pid, signal.SIGINT)
+    return proc.communicate(timeout=120)
+
+
+def test_ctrl_c_writes_a_checkpoint_and_resume_continues_from_it(tmp_path):
+    run = tmp_path / "run"
+    argv = ["--n-envs", "2", "--vec-env", "subproc", "--n-steps", "64", "--batch-size", "64"]
+    argv += ["--eval-freq", "1000000", "--no-progress"]
+    proc = start_training(
+        ["Foosball-Block-v0", "--timesteps", "1000000", *argv, "--out", str(run)], tmp_path
+    )
+    out, err = interrupt_once_stepping(proc, run, tb_runs=1)
+    # The default checkpoint interval (50 000 steps) is far off: this one is the interrupt's.
+    assert proc.returncode == 130, err
+    assert "stopped by SIGINT" in out and "--resume" in out and "Traceback" not in err
+    first = json.loads((run / "checkpoints" / "latest.json").read_text())["timesteps"]
+    assert 0 < first < 50_000 and not (run / "model.zip").exists()
+
+    proc = start_training(["--resume", str(run), "--no-progress"], tmp_path)
+    out, err = interrupt_once_stepping(proc, run, tb_runs=2)
+    assert proc.returncode == 130, err
+    second = json.loads((run / "checkpoints" / "latest.json").read_text())["timesteps"]
+    assert second > first
+
+
+def test_a_start_that_fails_leaves_no_run_behind(tmp_path, capsys):
+    run = tmp_path / "run"
+    argv = ["train", "Foosball-Block-v0", "--out", str(run), "--no-progress"]
+    with pytest.raises(SystemExit) as exit_info:
+        main([*argv, "--selfplay-threshold", "1.5"])
+    assert exit_info.value.code == 2
+    assert "selfplay_threshold must lie in [-1, 1)" in capsys.readouterr().err
+    assert not (run / "config.json").exists()
+
+
+def test_a_directory_with_a_configuration_but_no_checkpoint_can_start_again(tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    # What a start stopped before its first checkpoint leaves.
+    TrainConfig("Foosball-Block-v0", timesteps=128).save(run / "config.json")
+    (run / "eval.csv").write_text("stale\n")
+    small = ["--timesteps", "128", "--n-envs", "1", "--n-steps", "64", "--batch-size", "64"]
+    small += ["--eval-freq", "128", "--eval-episodes", "1", "--no-progress"]
+    assert main(["train", "Foosball-Block-v0", *small, "--out", str(run)]) == 0
+    assert [int(r["timesteps"]) for r in read_curve(run / "eval.csv")] == [128]
+    shutil.rmtree(run / "checkpoints")
+    (run / "model.zip").unlink()
+    assert main(["train", "--resume", str(run), "--no-progress"]) == 0
+    assert "starting the run over" in capsys.readouterr().out
+    assert (run / "model.zip").exists()

@@ -29,6 +29,13 @@ Joint = tuple[str, str]  # (rod name, "slide" | "spin"), as in foosball_gym.inte
 
 JOINT_KINDS = ("slide", "spin")
 DRIVE_MODES = ("csp", "pp")
+# The drives' interpolation time period (0x60C2) is a count of 0.1 ms in 8 bits: below 40 Hz it
+# overflows, and above 1 kHz the count is so small that rounding it misstates the period by
+# several per cent.
+CONTROL_HZ_RANGE = (40.0, 1000.0)
+# Beyond these a stalled loop or a dead drive would go unnoticed while the rods keep moving.
+MAX_WATCHDOG_S = 0.1
+MAX_HEARTBEAT_TIMEOUT_S = 0.5
 # The bit rates CiA 301 defines for CANopen.
 BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 
@@ -377,9 +384,35 @@ def load_config(path: str | os.PathLike) -> TableConfig:
     except yaml.YAMLError as e:
         raise ConfigError("<file>", f"is not valid YAML: {e}", str(path)) from None
     try:
-        return TableConfig.from_dict(data)
+        config = TableConfig.from_dict(data)
+        _check_real_table(config)
     except ConfigError as e:
         raise ConfigError(e.field, e.problem, str(path)) from None
+    return config
+
+
+def _check_real_table(config: TableConfig) -> None:
+    """The limits a real table's drives and safety need, which a simulated table (built in
+    code, with a slower heartbeat for a loaded test machine) does without."""
+    low, high = CONTROL_HZ_RANGE
+    if not low <= config.control_hz <= high:
+        raise ConfigError(
+            "control_hz",
+            f"must lie in {low:g} to {high:g} Hz (the drives take the SYNC period as a "
+            f"count of 0.1 ms up to 255), got {config.control_hz:g}",
+        )
+    if config.watchdog_s > MAX_WATCHDOG_S:
+        raise ConfigError(
+            "watchdog_s",
+            f"must be at most {MAX_WATCHDOG_S} s, so that a stalled loop stops the rods "
+            f"within it, got {config.watchdog_s:g}",
+        )
+    if config.heartbeat_timeout_s > MAX_HEARTBEAT_TIMEOUT_S:
+        raise ConfigError(
+            "heartbeat_timeout_s",
+            f"must be at most {MAX_HEARTBEAT_TIMEOUT_S} s, so that a lost drive is noticed "
+            f"within it, got {config.heartbeat_timeout_s:g}",
+        )
 
 
 def save_config(config: TableConfig, path: str | os.PathLike) -> None:

@@ -16,12 +16,12 @@ from gymnasium import spaces
 from gymnasium.envs.registration import load_env_creator
 from pettingzoo import ParallelEnv
 
-from foosball_gym import ENV_IDS
 from foosball_gym import table as T
 from foosball_gym.envs.base import RENDER_MODES, FoosballEnv
 from foosball_gym.envs.rewards import TERMS, RewardComputer
 from foosball_gym.interface.observations import check_flag, mirrored_builder
 from foosball_gym.interface.task import check_action
+from foosball_gym.registration import ENV_IDS
 from foosball_gym.tasks.registry import TASKS
 
 AGENTS = ("home", "away")

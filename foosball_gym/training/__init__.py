@@ -12,6 +12,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from foosball_gym.training.models import load_policy
     from foosball_gym.training.selfplay import (
         OpponentActionWrapper,
         SelfPlayCallback,
@@ -20,6 +21,7 @@ if TYPE_CHECKING:
     from foosball_gym.training.snapshot import PolicySnapshot
 
 _LAZY = {
+    "load_policy": "models",
     "OpponentActionWrapper": "selfplay",
     "PolicySnapshot": "snapshot",
     "SelfPlayCallback": "selfplay",
@@ -31,6 +33,7 @@ __all__ = [
     "PolicySnapshot",
     "SelfPlayCallback",
     "SelfPlayVecEnv",
+    "load_policy",
     "require_train_extra",
 ]
 

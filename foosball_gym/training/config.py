@@ -8,6 +8,7 @@ without them.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict, dataclass, field, fields
 from importlib import metadata
 from pathlib import Path
@@ -15,8 +16,8 @@ from typing import Any
 
 import gymnasium as gym
 
-import foosball_gym
 from foosball_gym.catalog import check_env_id
+from foosball_gym.registration import __version__
 from foosball_gym.table import PHYSICS_REVISION
 from foosball_gym.training.files import atomic_write_text
 
@@ -44,7 +45,7 @@ def physics_record() -> dict[str, Any]:
         pybullet = None
     return {
         "revision": PHYSICS_REVISION,
-        "package_version": foosball_gym.__version__,
+        "package_version": __version__,
         "pybullet": pybullet,
     }
 
@@ -71,7 +72,7 @@ def physics_mismatch(config: dict[str, Any] | None, name: str) -> str | None:
             "(the record was introduced after that revision)"
         )
     return (
-        f"{trained}, but foosball_gym {foosball_gym.__version__} simulates physics revision "
+        f"{trained}, but foosball_gym {__version__} simulates physics revision "
         f"{PHYSICS_REVISION}: its results may differ from those it reached in training. "
         "Retraining it on the current physics is advised."
     )
@@ -155,11 +156,37 @@ class TrainConfig:
         ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if int(self.seed) < 0:
+            raise ValueError(f"seed must be 0 or more, got {self.seed}")
+        if int(self.pretrain_episodes) < 0:
+            raise ValueError(f"pretrain_episodes must be 0 or more, got {self.pretrain_episodes}")
+        if self.algo == "ppo" and (self.n_steps * self.n_envs < 2 or self.batch_size < 2):
+            raise ValueError(
+                "PPO needs n_steps x n_envs and batch_size of at least 2, got "
+                f"{self.n_steps} x {self.n_envs} and {self.batch_size}"
+            )
+        if not self.net_arch or any(int(n) < 1 for n in self.net_arch):
+            raise ValueError(f"net_arch must be layer sizes of at least 1, got {self.net_arch}")
+        # Written `not x > 0` and alike, so that NaN fails too.
+        if not 0 < self.learning_rate < math.inf:
+            raise ValueError(f"learning_rate must be a positive number, got {self.learning_rate}")
+        if not 0 < self.gamma <= 1:
+            raise ValueError(f"gamma must lie in (0, 1], got {self.gamma}")
+        if not 0 <= self.gae_lambda <= 1:
+            raise ValueError(f"gae_lambda must lie in [0, 1], got {self.gae_lambda}")
+        if not 0 < self.clip_range < math.inf:
+            raise ValueError(f"clip_range must be a positive number, got {self.clip_range}")
+        if not math.isfinite(self.log_std_init):
+            raise ValueError(f"log_std_init must be a finite number, got {self.log_std_init}")
+        if not -1 <= self.selfplay_threshold < 1:
+            raise ValueError(
+                f"selfplay_threshold must lie in [-1, 1), got {self.selfplay_threshold}"
+            )
         if self.lr_schedule not in LR_SCHEDULES:
             raise ValueError(
                 f"unknown lr_schedule {self.lr_schedule!r}; allowed: {', '.join(LR_SCHEDULES)}"
             )
-        if self.target_kl is not None and not self.target_kl > 0:
+        if self.target_kl is not None and not 0 < self.target_kl < math.inf:
             raise ValueError(f"target_kl must be positive, got {self.target_kl}")
         if self.target_success is not None and not 0 < self.target_success <= 1:
             raise ValueError(f"target_success must lie in (0, 1], got {self.target_success}")

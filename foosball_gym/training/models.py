@@ -7,18 +7,18 @@ directory each, and load as ``builtin:NAME``.
 from __future__ import annotations
 
 import json
-import pickle
 import warnings
-import zipfile
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from foosball_gym.training.config import PhysicsMismatchWarning, physics_mismatch
-from foosball_gym.training.files import CONFIG_FILE, MODEL_FILE, NORM_FILE
-from foosball_gym.training.run import ALGOS
-from foosball_gym.training.snapshot import PolicySnapshot
+from foosball_gym.training.files import CONFIG_FILE, LEGACY_NORM_FILE, MODEL_FILE, NORM_FILE
+from foosball_gym.training.snapshot import PolicySnapshot, policy_from_state_dict
+from foosball_gym.training.storage import UntrustedFileError, read_model_zip, read_norm
 
 __all__ = [
     "LoadedPolicy",
@@ -36,10 +36,31 @@ class ModelLoadError(ValueError):
 
 @dataclass
 class LoadedPolicy:
+    """A trained policy with the environment it was trained on; call it with an observation
+    to get the action (its normalisation applied)."""
+
     policy: PolicySnapshot
     env_id: str | None
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     source: str = ""
+
+    def __call__(self, obs: Any) -> np.ndarray:
+        return self.policy(obs)
+
+    def check_env(self, env_id: str, env_kwargs: dict[str, Any] | None = None) -> None:
+        """Raise ValueError where the environment's observations do not fit the policy."""
+        import gymnasium as gym
+
+        env = gym.make(env_id, **(env_kwargs or {}))
+        size = int(np.prod(env.observation_space.shape))
+        env.close()
+        expected = self.policy.observation_size
+        if size != expected:
+            trained = f" of {self.env_id}" if self.env_id else ""
+            raise ValueError(
+                f"{self.source} expects observations of size {expected}{trained}, but "
+                f"{env_id} gives {size}: give a model trained on {env_id}"
+            )
 
 
 def _builtin_root() -> Path:
@@ -68,15 +89,28 @@ def builtin_path(name: str) -> Path:
     return _builtin_root() / name
 
 
-def load_policy(spec: str | Path) -> LoadedPolicy:
+def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     """Load a policy from a run directory, a model ``.zip``, or ``builtin:NAME``.
 
     The environment id and options come from the run's ``config.json`` (next to the zip, or
     one level up for a checkpoint); a bare zip without one loads with ``env_id=None``.
 
+    Nothing is unpickled unless ``trust`` is given: the weights are read as tensors and the
+    policy rebuilt around them, the pickled fields SB3 keeps in the zip are left unread, and
+    normalisation statistics are read from ``vecnormalize.json``. A run from before that file
+    (``vecnormalize.pkl``) is refused with a message saying how to migrate it.
+
     Warns with :class:`PhysicsMismatchWarning` where the model was trained on another physics
     revision than the current one; a model without a record (a run from before runs recorded
     it, or a bare zip) counts as revision 1.
+
+    Args:
+        spec: the run directory, the model zip, or ``builtin:NAME``.
+        trust: also read pickled files (a legacy ``vecnormalize.pkl``): only for files whose
+            source you trust, since unpickling runs whatever code the file holds.
+
+    Raises:
+        ModelLoadError: no model there, or it cannot be read (or only by unpickling, untrusted).
     """
     text = str(spec)
     if text.startswith("builtin:"):
@@ -93,46 +127,35 @@ def load_policy(spec: str | Path) -> LoadedPolicy:
     if not zip_path.exists():
         raise ModelLoadError(f"no model at {zip_path}")
     config = _find_config(run_dir)
-    algo = (config or {}).get("algo")
-    candidates = [ALGOS[algo]] if algo in ALGOS else list(ALGOS.values())
-    model, errors = None, []
-    for cls in candidates:
-        try:
-            model = cls.load(zip_path, device="cpu")
-            break
-        except (
-            zipfile.BadZipFile,
-            KeyError,
-            ValueError,
-            RuntimeError,
-            EOFError,
-            pickle.UnpicklingError,
-            AttributeError,
-            TypeError,
-        ) as err:
-            errors.append(f"{cls.__name__}: {type(err).__name__}: {err}")
-    if model is None:
+    try:
+        _, params, _ = read_model_zip(zip_path)
+        policy = policy_from_state_dict(params["policy"])
+    except (KeyError, ValueError, RuntimeError, EOFError) as err:
+        reason = "it has no policy weights" if isinstance(err, KeyError) else str(err)
         raise ModelLoadError(
-            f"cannot read {zip_path} as a Stable-Baselines3 model ({'; '.join(errors)})"
-        )
+            f"cannot read {zip_path} as a Stable-Baselines3 model ({reason})"
+        ) from None
+    env_id = (config or {}).get("env_id")
     norm = _find_norm(zip_path, run_dir)
     if norm is not None:
+        run = text if text.startswith("builtin:") else run_dir
         try:
-            with open(norm, "rb") as f:
-                stats = pickle.load(f)
-            snapshot = PolicySnapshot(
-                model.policy, stats.obs_rms.mean, stats.obs_rms.var, stats.clip_obs, stats.epsilon
-            )
+            stats = read_norm(norm, run, trust)
+        except UntrustedFileError as err:
+            raise ModelLoadError(str(err)) from None
         except Exception as err:  # noqa: BLE001 - any unreadable file gets the same message
             raise ModelLoadError(f"cannot read normalisation statistics {norm}: {err}") from err
+        snapshot = PolicySnapshot(
+            policy, stats.obs_mean, stats.obs_var, stats.clip_obs, stats.epsilon, env_id=env_id
+        )
     else:
-        snapshot = PolicySnapshot(model.policy)
+        snapshot = PolicySnapshot(policy, env_id=env_id)
     mismatch = physics_mismatch(config, f"the model {text}")
     if mismatch:
         warnings.warn(mismatch, PhysicsMismatchWarning, stacklevel=2)
     return LoadedPolicy(
         policy=snapshot,
-        env_id=(config or {}).get("env_id"),
+        env_id=env_id,
         env_kwargs=dict((config or {}).get("env_kwargs", {})),
         source=str(path),
     )
@@ -149,7 +172,11 @@ def _find_config(run_dir: Path) -> dict[str, Any] | None:
 
 
 def _find_norm(zip_path: Path, run_dir: Path) -> Path | None:
-    for candidate in (zip_path.with_name(f"{zip_path.stem}_{NORM_FILE}"), run_dir / NORM_FILE):
-        if candidate.exists():
-            return candidate
-    return None
+    """The model's own statistics (a checkpoint's) before the run's; at each place the plain
+    file before a legacy pickle, so a pickle beside a plain file is never read."""
+    candidates = [zip_path.with_name(f"{zip_path.stem}_{name}") for name in NORM_NAMES]
+    candidates += [run_dir / name for name in NORM_NAMES]
+    return next((c for c in candidates if c.exists()), None)
+
+
+NORM_NAMES = (NORM_FILE, LEGACY_NORM_FILE)

@@ -8,8 +8,13 @@ from __future__ import annotations
 
 import csv
 import json
+import shutil
+import signal
+import threading
 import time
 import warnings
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,17 +38,43 @@ from foosball_gym.training.config import (
 )
 from foosball_gym.training.files import (
     BEST_DIR,
+    CHECKPOINT_DIR,
     CONFIG_FILE,
+    LATEST_FILE,
+    LEGACY_NORM_FILE,
     MODEL_FILE,
     NORM_FILE,
     atomic_write_text,
+    has_checkpoint,
 )
 from foosball_gym.training.pretrain import clone, collect
 from foosball_gym.training.selfplay import OpponentActionWrapper, SelfPlayCallback, SelfPlayVecEnv
 from foosball_gym.training.snapshot import PolicySnapshot
+from foosball_gym.training.storage import NormStats, read_model_zip, read_norm, strip_pickles
 
 ALGOS = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
-VEC_ENVS = dict(zip(VEC_ENV_KINDS, (DummyVecEnv, SubprocVecEnv), strict=True))
+
+
+def _ignoring_sigint(env_fn: Callable[[], Any]) -> Callable[[], Any]:
+    def make() -> Any:
+        # Ctrl-C reaches every process of the terminal's group; the main process alone stops
+        # the run, after writing a checkpoint, and a worker gone first would break its last
+        # steps.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        # This function reaches the worker by value, so nothing has registered the ids there.
+        import foosball_gym  # noqa: F401, F811
+
+        return env_fn()
+
+    return make
+
+
+def subproc_vec_env(env_fns: list[Callable[[], Any]], **kwargs: Any) -> SubprocVecEnv:
+    """``SubprocVecEnv`` whose workers ignore SIGINT."""
+    return SubprocVecEnv([_ignoring_sigint(fn) for fn in env_fns], **kwargs)
+
+
+VEC_ENVS = dict(zip(VEC_ENV_KINDS, (DummyVecEnv, subproc_vec_env), strict=True))
 
 
 def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
@@ -222,7 +253,7 @@ class CheckpointCallback(BaseCallback):
 
     def __init__(self, out: Path, every: int) -> None:
         super().__init__()
-        self.dir = out / "checkpoints"
+        self.dir = out / CHECKPOINT_DIR
         self.every = every
         self._next = 0
 
@@ -237,32 +268,83 @@ class CheckpointCallback(BaseCallback):
         return True
 
     def write(self) -> None:
+        self.dir.mkdir(parents=True, exist_ok=True)
         name = f"model_{self.num_timesteps:010d}"
         save_model(self.model, self.dir / f"{name}.zip", self.dir / f"{name}_{NORM_FILE}")
         pointer = {"model": f"{name}.zip", "timesteps": int(self.num_timesteps)}
         if self.model.get_vec_normalize_env() is not None:
             pointer["vecnormalize"] = f"{name}_{NORM_FILE}"
-        atomic_write_text(self.dir / "latest.json", json.dumps(pointer))
+        atomic_write_text(self.dir / LATEST_FILE, json.dumps(pointer))
+
+
+class StopOnSignal(BaseCallback):
+    """Ends training at the next step once SIGINT or SIGTERM arrived (see :meth:`installed`).
+
+    Stopping between steps, not where the signal lands, leaves no update half done, so the
+    checkpoint written afterwards holds a consistent model. A second signal stops at once.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.signum: int | None = None
+
+    def _on_step(self) -> bool:
+        return self.signum is None
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if self.signum is not None:
+            raise KeyboardInterrupt
+        self.signum = signum
+
+    @contextmanager
+    def installed(self) -> Iterator[None]:
+        """Catch SIGINT and SIGTERM meanwhile (only the main thread may; elsewhere: nothing)."""
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        previous = {
+            sig: signal.signal(sig, self._handle) for sig in (signal.SIGINT, signal.SIGTERM)
+        }
+        try:
+            yield
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
 
 
 def save_model(model: Any, path: Path, norm_path: Path) -> None:
-    """Save the model (and its VecNormalize statistics) through a temporary file each."""
+    """Save the model (and its VecNormalize statistics) through a temporary file each.
+
+    Neither holds a pickle: the zip loses the pickled fields SB3 writes into it (nothing here
+    reads them back) and the statistics are written as numbers.
+    """
     tmp = path.with_name(path.stem + ".tmp.zip")
     model.save(tmp)
+    strip_pickles(tmp)
     tmp.replace(path)
     norm = model.get_vec_normalize_env()
     if norm is not None:
-        tmp_norm = norm_path.with_name(norm_path.name + ".tmp")
-        norm.save(tmp_norm)
-        tmp_norm.replace(norm_path)
+        NormStats.of(norm).save(norm_path)
 
 
 @dataclass
 class TrainResult:
+    """What a call of :func:`train` did.
+
+    ``signal`` is the number of the signal (SIGINT, SIGTERM) that stopped the run before its
+    budget, after a checkpoint was written; None where it ran to the end.
+    """
+
     out: Path
     timesteps: int
     seconds: float
     reached: dict[str, float] | None
+    signal: int | None = None
+
+
+# What a start that failed may leave in a run directory without a checkpoint; a new start
+# clears it so that its curve and best model are its own.
+_STALE = ("eval.csv", "eval.png", "pretrain.json", BEST_DIR, "selfplay")
 
 
 def train(
@@ -274,15 +356,22 @@ def train(
 ) -> TrainResult:
     """Train (or, with ``resume``, continue) the run in directory ``out``.
 
+    Everything is checked, the envs and the model built, before ``config.json`` is written,
+    so a start that fails leaves no run behind. A directory with a ``config.json`` but no
+    checkpoint (a start stopped before its first one) is no run either: a new one may start
+    there, and ``resume`` starts it over from its configuration.
+
+    SIGINT (Ctrl-C) or SIGTERM during training end it at the next step with a checkpoint
+    written; the result's ``signal`` says which arrived.
+
     Args:
         config: the run's configuration (ignored with ``resume``: the run's own is read).
         out: the run directory.
         progress_bar: show SB3's progress bar.
-        resume: continue from the last checkpoint in ``out``.
+        resume: continue from the last checkpoint in ``out`` (or its final model).
         callbacks: extra SB3 callbacks, run after the run's own.
     """
     out = Path(out)
-    th.set_num_threads(config.torch_threads)
     if resume:
         config = TrainConfig.load(out / CONFIG_FILE)
         mismatch = physics_mismatch(json.loads((out / CONFIG_FILE).read_text()), f"the run {out}")
@@ -294,39 +383,52 @@ def train(
                 stacklevel=2,
             )
     config.check()
+    th.set_num_threads(config.torch_threads)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out} is a file, not a run directory")
+    continuing = resume and has_checkpoint(out)
+    if not resume and has_checkpoint(out):
+        raise ValueError(
+            f"{out} already holds a run; use --resume to continue it or choose another --out"
+        )
     out.mkdir(parents=True, exist_ok=True)
-    if not resume:
-        if (out / CONFIG_FILE).exists():
-            raise ValueError(
-                f"{out} already holds a run; use --resume to continue it or choose another --out"
-            )
-        config.save(out / CONFIG_FILE)
 
     venv = make_env(config)
     done_steps, wall_offset = 0, 0.0
-    if resume:
-        model, done_steps = _load_checkpoint(config, out, venv)
-        if (out / "eval.csv").exists():
-            rows = read_curve(out / "eval.csv")
-            wall_offset = rows[-1]["wall_seconds"] if rows else 0.0
-    else:
-        model = build_model(config, venv, out / "tb")
-        if config.pretrain_episodes:
-            demos = collect(
-                config.env_id,
-                config.env_kwargs,
-                config.pretrain_episodes,
-                config.gamma,
-                seed=config.seed,
-            )
-            fit = clone(model, demos, seed=config.seed)
-            record = {
-                "episodes": config.pretrain_episodes,
-                "samples": len(demos.actions),
-                "scripted_success_rate": demos.success_rate,
-                **fit,
-            }
-            atomic_write_text(out / "pretrain.json", json.dumps(record, indent=2))
+    try:
+        if continuing:
+            model, done_steps = _load_checkpoint(config, out, venv)
+            if (out / "eval.csv").exists():
+                rows = read_curve(out / "eval.csv")
+                wall_offset = rows[-1]["wall_seconds"] if rows else 0.0
+        else:
+            model = build_model(config, venv, out / "tb")
+            for name in _STALE:
+                stale = out / name
+                if stale.is_dir():
+                    shutil.rmtree(stale)
+                elif stale.exists():
+                    stale.unlink()
+            config.save(out / CONFIG_FILE)
+    except BaseException:
+        venv.close()
+        raise
+    if not continuing and config.pretrain_episodes:
+        demos = collect(
+            config.env_id,
+            config.env_kwargs,
+            config.pretrain_episodes,
+            config.gamma,
+            seed=config.seed,
+        )
+        fit = clone(model, demos, seed=config.seed)
+        record = {
+            "episodes": config.pretrain_episodes,
+            "samples": len(demos.actions),
+            "scripted_success_rate": demos.success_rate,
+            **fit,
+        }
+        atomic_write_text(out / "pretrain.json", json.dumps(record, indent=2))
 
     if config.pretrain_episodes and isinstance(venv, VecNormalize):
         # The clone was fitted to observations scaled by the demonstrations' statistics; left
@@ -334,7 +436,9 @@ def train(
         # (Score from rest: a clone at 86 % fell to 6-30 % with the learning rate at 1e-12).
         venv.training = False
 
-    own: list[BaseCallback] = [CheckpointCallback(out, config.checkpoint_freq)]
+    stop = StopOnSignal()
+    checkpoint = CheckpointCallback(out, config.checkpoint_freq)
+    own: list[BaseCallback] = [stop, checkpoint]
     if config.self_play:
         own.append(
             SelfPlayCallback(
@@ -350,35 +454,65 @@ def train(
 
     start = time.perf_counter()
     remaining = max(config.timesteps - done_steps, 0)
-    if remaining:
-        model.learn(
-            remaining,
-            callback=CallbackList(own + list(callbacks or [])),
-            progress_bar=progress_bar,
-            reset_num_timesteps=not resume,
-            tb_log_name="run",
-        )
-    rows = read_curve(out / "eval.csv") if (out / "eval.csv").exists() else []
-    if curve.reached is None and (not rows or rows[-1]["timesteps"] < model.num_timesteps):
-        curve.init_callback(model)  # a last point for the curve at the final timestep
-        curve.run_eval()
-    save_model(model, out / MODEL_FILE, out / NORM_FILE)
-    venv.close()
+    try:
+        if remaining:
+            with stop.installed():
+                model.learn(
+                    remaining,
+                    callback=CallbackList(own + list(callbacks or [])),
+                    progress_bar=progress_bar,
+                    reset_num_timesteps=not continuing,
+                    tb_log_name="run",
+                )
+        if stop.signum is not None:
+            checkpoint.num_timesteps = model.num_timesteps
+            checkpoint.write()
+            return TrainResult(
+                out, int(model.num_timesteps), time.perf_counter() - start, None, stop.signum
+            )
+        rows = read_curve(out / "eval.csv") if (out / "eval.csv").exists() else []
+        if curve.reached is None and (not rows or rows[-1]["timesteps"] < model.num_timesteps):
+            curve.init_callback(model)  # a last point for the curve at the final timestep
+            curve.run_eval()
+        save_model(model, out / MODEL_FILE, out / NORM_FILE)
+    finally:
+        venv.close()
     return TrainResult(out, int(model.num_timesteps), time.perf_counter() - start, curve.reached)
 
 
 def _load_checkpoint(config: TrainConfig, out: Path, venv: Any) -> tuple[Any, int]:
-    pointer_file = out / "checkpoints" / "latest.json"
-    if not pointer_file.exists():
-        raise ValueError(f"{out} has no checkpoint to resume from (no checkpoints/latest.json)")
-    pointer = json.loads(pointer_file.read_text())
-    if "vecnormalize" in pointer and isinstance(venv, VecNormalize):
-        saved = VecNormalize.load(str(out / "checkpoints" / pointer["vecnormalize"]), venv.venv)
-        venv.obs_rms, venv.ret_rms = saved.obs_rms, saved.ret_rms
-    model = ALGOS[config.algo].load(
-        out / "checkpoints" / pointer["model"],
-        env=venv,
-        device="cpu",
-        tensorboard_log=str(out / "tb"),
-    )
-    return model, int(pointer["timesteps"])
+    """The model of the run's last checkpoint (or its final model), and its timesteps.
+
+    The model is built from the run's configuration and given the checkpoint's weights and
+    optimiser state, read as tensors, so nothing is unpickled. A checkpoint of a run from
+    before (with ``vecnormalize.pkl``) is refused, with how to migrate it.
+    """
+    pointer_file = out / CHECKPOINT_DIR / LATEST_FILE
+    if pointer_file.exists():
+        pointer = json.loads(pointer_file.read_text())
+        zip_path = out / CHECKPOINT_DIR / pointer["model"]
+        norm_path = (
+            out / CHECKPOINT_DIR / pointer["vecnormalize"] if "vecnormalize" in pointer else None
+        )
+    else:
+        zip_path, pointer = out / MODEL_FILE, None
+        found = [out / n for n in (NORM_FILE, LEGACY_NORM_FILE) if (out / n).exists()]
+        norm_path = found[0] if found else None
+    if norm_path is not None and isinstance(venv, VecNormalize):
+        read_norm(norm_path, out, trust=False).apply(venv)
+    try:
+        data, params, variables = read_model_zip(zip_path)
+    except ValueError as err:
+        raise ValueError(f"cannot resume from {zip_path}: {err}") from None
+    model = build_model(config, venv, out / "tb")
+    try:
+        model.set_parameters(params, exact_match=True, device="cpu")
+    except (ValueError, RuntimeError) as err:
+        raise ValueError(f"{zip_path} does not fit the run's configuration: {err}") from None
+    for name, value in (variables or {}).items():
+        if value is not None:
+            getattr(model, name).data = value.data
+    steps = int(pointer["timesteps"]) if pointer else int(data.get("num_timesteps", 0))
+    model.num_timesteps = steps
+    model._n_updates = int(data.get("_n_updates", 0))
+    return model, steps

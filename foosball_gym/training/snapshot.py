@@ -1,13 +1,84 @@
-"""Frozen copies of a Stable-Baselines3 policy, usable as an opponent or for evaluation."""
+"""Frozen copies of a Stable-Baselines3 policy, usable as an opponent or for evaluation.
+
+A snapshot is saved as tensors and plain numbers and read with ``weights_only=True``; the
+policy is rebuilt from the shapes of its weights (:func:`policy_from_state_dict`), so reading
+one never unpickles an object.
+"""
 
 from __future__ import annotations
 
 import copy
+import pickle
+import re
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch as th
+from gymnasium import spaces
+
+from foosball_gym.training.storage import refusal
+
+SNAPSHOT_FORMAT = 1
+
+
+def _layers(state: Mapping[str, Any], prefix: str) -> list[Any]:
+    """The weights of the Linear layers of the ``nn.Sequential`` at ``prefix``, in order."""
+    pattern = re.compile(rf"{re.escape(prefix)}\.(\d+)\.weight")
+    found = sorted(
+        (int(m.group(1)), value) for key, value in state.items() if (m := pattern.fullmatch(key))
+    )
+    return [value for _, value in found]
+
+
+def _constant(_: float) -> float:
+    return 0.0
+
+
+def policy_from_state_dict(state: Mapping[str, Any]) -> Any:
+    """The SB3 ``MlpPolicy`` (PPO's or SAC's) these weights belong to, holding them.
+
+    Its layer sizes and its observation and action sizes are read off the weights; the
+    activations are SB3's defaults, which is what :func:`~foosball_gym.training.run.build_model`
+    uses. Actions are in [-1, 1], as in every environment of this package.
+
+    Raises:
+        ValueError: the weights are not of a policy that can be rebuilt this way.
+    """
+    if "action_net.weight" in state:
+        from stable_baselines3.common.policies import ActorCriticPolicy
+
+        pi = _layers(state, "mlp_extractor.policy_net")
+        vf = _layers(state, "mlp_extractor.value_net")
+        obs_size = (pi[0] if pi else state["action_net.weight"]).shape[1]
+        act_size = state["action_net.weight"].shape[0]
+        net_arch = {"pi": [w.shape[0] for w in pi], "vf": [w.shape[0] for w in vf]}
+        cls, extra = ActorCriticPolicy, {}
+    elif "actor.mu.weight" in state:
+        from stable_baselines3.sac.policies import SACPolicy
+
+        pi = _layers(state, "actor.latent_pi")
+        qf = _layers(state, "critic.qf0")
+        obs_size = (pi[0] if pi else state["actor.mu.weight"]).shape[1]
+        act_size = state["actor.mu.weight"].shape[0]
+        net_arch = {"pi": [w.shape[0] for w in pi], "qf": [w.shape[0] for w in qf[:-1]]}
+        critics = {k.split(".")[1] for k in state if k.startswith("critic.qf")}
+        cls, extra = SACPolicy, {"n_critics": len(critics)}
+    else:
+        raise ValueError("the weights are of neither a PPO nor a SAC MlpPolicy")
+    policy = cls(
+        spaces.Box(-np.inf, np.inf, (int(obs_size),), np.float32),
+        spaces.Box(-1.0, 1.0, (int(act_size),), np.float32),
+        _constant,
+        net_arch=net_arch,
+        **extra,
+    )
+    try:
+        policy.load_state_dict(dict(state))
+    except RuntimeError as err:
+        raise ValueError(f"the weights do not fit an MlpPolicy: {err}") from None
+    return policy
 
 
 class PolicySnapshot:
@@ -22,6 +93,7 @@ class PolicySnapshot:
         obs_mean, obs_var: running statistics of ``VecNormalize`` (None: no normalisation).
         clip_obs, epsilon: ``VecNormalize``'s clipping and epsilon.
         generation: a label (the self-play generation this snapshot was taken at).
+        env_id: the environment it was trained on, where known (error messages name it).
     """
 
     def __init__(
@@ -32,6 +104,7 @@ class PolicySnapshot:
         clip_obs: float = 10.0,
         epsilon: float = 1e-8,
         generation: int = 0,
+        env_id: str | None = None,
     ) -> None:
         # Rebuilt from its constructor arguments and weights (as SB3 saves policies): a deep
         # copy would trip over the tensors a policy keeps from its last forward pass.
@@ -46,6 +119,12 @@ class PolicySnapshot:
         self.clip_obs = float(clip_obs)
         self.epsilon = float(epsilon)
         self.generation = generation
+        self.env_id = env_id
+
+    @property
+    def observation_size(self) -> int:
+        """The size of the observations the policy takes."""
+        return int(np.prod(self.policy.observation_space.shape))
 
     @classmethod
     def of_model(cls, model: Any, generation: int = 0) -> PolicySnapshot:
@@ -89,14 +168,19 @@ class PolicySnapshot:
         )
 
     def save(self, path: str | Path) -> None:
-        """Write the snapshot (weights, normalisation) atomically."""
+        """Write the snapshot (weights, normalisation) atomically, as tensors and numbers."""
         path = Path(path)
         tmp = path.with_suffix(path.suffix + ".tmp")
+
+        def tensor(value: np.ndarray | None) -> th.Tensor | None:
+            return None if value is None else th.as_tensor(value, dtype=th.float64)
+
         th.save(
             {
-                "policy": self.policy,
-                "obs_mean": self.obs_mean,
-                "obs_var": self.obs_var,
+                "format": SNAPSHOT_FORMAT,
+                "policy": {k: v.detach().cpu() for k, v in self.policy.state_dict().items()},
+                "obs_mean": tensor(self.obs_mean),
+                "obs_var": tensor(self.obs_var),
                 "clip_obs": self.clip_obs,
                 "epsilon": self.epsilon,
                 "generation": self.generation,
@@ -106,12 +190,39 @@ class PolicySnapshot:
         tmp.replace(path)
 
     @classmethod
-    def load(cls, path: str | Path) -> PolicySnapshot:
-        data = th.load(path, map_location="cpu", weights_only=False)
+    def load(cls, path: str | Path, trust: bool = False) -> PolicySnapshot:
+        """Read a snapshot :meth:`save` wrote.
+
+        Args:
+            trust: also read a snapshot of the older format, a pickled policy object, which
+                runs whatever code the file holds; without it such a file is refused.
+
+        Raises:
+            UntrustedFileError: an older snapshot, and ``trust`` is False.
+            ValueError: the file is not a snapshot.
+        """
+        path = Path(path)
+        try:
+            data = th.load(path, map_location="cpu", weights_only=True)
+        except pickle.UnpicklingError:
+            if not trust:
+                raise refusal(path, path.parent.parent) from None
+            data = th.load(path, map_location="cpu", weights_only=False)
+        except (RuntimeError, EOFError, OSError) as err:
+            raise ValueError(f"cannot read the snapshot {path}: {err}") from None
+        if not isinstance(data, dict) or "policy" not in data:
+            raise ValueError(f"{path} is not a policy snapshot")
+        policy = data["policy"]
+        if isinstance(policy, Mapping):
+            policy = policy_from_state_dict(policy)
+
+        def array(value: Any) -> np.ndarray | None:
+            return None if value is None else np.asarray(value, dtype=np.float64)
+
         return cls(
-            data["policy"],
-            data["obs_mean"],
-            data["obs_var"],
+            policy,
+            array(data["obs_mean"]),
+            array(data["obs_var"]),
             data["clip_obs"],
             data["epsilon"],
             data["generation"],
