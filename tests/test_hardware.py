@@ -56,15 +56,31 @@ def keeper_config(mode: str = "csp", **joint_overrides: dict) -> TableConfig:
 
 
 class Table:
-    """A simulated keeper table, its simulated drives and the master's drives, in lockstep."""
+    """A simulated keeper table, its simulated drives and the master's drives, in lockstep.
 
-    def __init__(self, config: TableConfig) -> None:
+    The master's command guard runs on the simulated time (the world waits for the loop);
+    the drives watch the master's heartbeat on the wall clock unless ``drive_clock`` says
+    "simulated".
+    """
+
+    def __init__(self, config: TableConfig, drive_clock: str = "wall") -> None:
         self.config = config
+        self.now = 0.0
         self.sim = TableSim(["home_keeper"])
         self.sim.reset()
-        self.sim_drives = SimulatedDrives(config, self.sim)
-        self.drives = TableDrives(config)
-        self.now = 0.0
+        clock = {"wall": time.monotonic, "simulated": self.clock}[drive_clock]
+        self.sim_drives = SimulatedDrives(config, self.sim, clock=clock)
+        self.drives = TableDrives(config, clock=self.clock)
+
+    def clock(self) -> float:
+        return self.now
+
+    def advance(self) -> None:
+        """One control step of the table alone, the master sending nothing."""
+        self.now += DT
+        self.sim_drives.apply()
+        self.sim.step()
+        self.sim_drives.publish()
 
     def step(self, targets: dict, *, command: bool = True, feed_state: bool = True) -> dict:
         """One control step: command, simulated drives apply, physics, publish, read, check."""
@@ -96,8 +112,8 @@ class Table:
 def make_table():
     made = []
 
-    def make(config: TableConfig | None = None) -> Table:
-        table = Table(config or keeper_config())
+    def make(config: TableConfig | None = None, **kwargs) -> Table:
+        table = Table(config or keeper_config(), **kwargs)
         made.append(table)
         return table
 
@@ -166,6 +182,10 @@ def test_config_save_and_load_round_trip(tmp_path):
         (lambda d: d["bus"].update(bitrate=1_000_001), "bus.bitrate", "1000000"),
         (lambda d: d["bus"].update(interface="carrier-pigeon"), "bus.interface", "socketcan"),
         (lambda d: d.update(watchdog_s=-1), "watchdog_s", "positive"),
+        (lambda d: d.update(watchdog_s=10), "watchdog_s", "at most 0.1 s"),
+        (lambda d: d.update(heartbeat_timeout_s=60), "heartbeat_timeout_s", "at most 0.5 s"),
+        (lambda d: d.update(control_hz=30), "control_hz", "40 to 1000 Hz"),
+        (lambda d: d.update(control_hz=5000), "control_hz", "40 to 1000 Hz"),
         (lambda d: d.update(camera=[1, 2]), "camera", "mapping"),
         (lambda d: d.pop("joints"), "joints", "missing"),
     ],
@@ -329,7 +349,7 @@ def test_limits_and_speeds_hold_against_a_policy_of_extremes_and_noise(make_tabl
 
 
 @pytest.mark.parametrize("stale", ["state estimate", "command"])
-def test_watchdog_quick_stops_the_drives_and_the_rods_hold(make_table, stale):
+def test_watchdog_quick_stops_the_drives_which_brake_on_their_ramp_and_hold(make_table, stale):
     table = make_table()
     table.drives.bring_up()
     for _ in range(20):
@@ -344,14 +364,23 @@ def test_watchdog_quick_stops_the_drives_and_the_rods_hold(make_table, stale):
     for drive in table.sim_drives.drives.values():
         assert drive.controlword == CW_QUICK_STOP
         assert state_name(drive.statusword) == "QUICK STOP ACTIVE"
-    stopped_at = table.joints()
+    stopped_at, speed_at_stop = (np.array(v) for v in table.sim.joint_states())
+    trace = []
     for _ in range(60):
-        table.sim_drives.apply()
-        table.sim.step()
-        table.sim_drives.publish()
+        table.advance()
+        trace.append(table.joints())
     positions, velocities = table.sim.joint_states()
-    np.testing.assert_allclose(positions, stopped_at, atol=1e-3)
+    # Braked on the quick stop ramp (max_acceleration), in the direction it was going, then
+    # held: no further than the ramp's stopping distance plus the joint's lag behind it.
+    deceleration = np.array([j.max_acceleration for j in table.config.joints])
+    travel = np.array(positions) - stopped_at
+    braking = speed_at_stop**2 / (2 * deceleration)
+    assert (np.abs(travel) <= braking + np.abs(speed_at_stop) / np.array([48.0, 72.0])).all()
+    assert (travel * speed_at_stop >= 0).all()
+    np.testing.assert_allclose(trace[-20:], [positions] * 20, atol=1e-4)
     np.testing.assert_allclose(velocities, 0.0, atol=1e-3)
+    for drive in table.sim_drives.drives.values():
+        assert drive.statusword & 0x0400  # target reached: halted in QUICK STOP ACTIVE
     with pytest.raises(WatchdogTripped):  # stays stopped until brought up again
         table.drives.command({SLIDE: 0.0}, table.now + DT)
 
@@ -416,7 +445,8 @@ def test_leaving_the_with_block_by_ctrl_c_or_an_exception_disables_the_drives(er
                     raise error("stop")
             sim_drives.apply()  # let the nodes process the last frames (NMT)
             for drive in sim_drives.drives.values():
-                assert drive.state == "READY TO SWITCH ON"
+                # Braked by a quick stop first; disable voltage is the way out of it.
+                assert drive.state == "SWITCH ON DISABLED"
                 assert drive.node.nmt.state == "PRE-OPERATIONAL"
     finally:
         sim.close()

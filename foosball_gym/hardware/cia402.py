@@ -5,6 +5,29 @@
 and velocity back, stops it, and reports its faults: the statusword's fault bit, EMCY messages
 and a lost or unexpected heartbeat, each with the node id and the reason.
 
+What bring-up sets so that a drive stops safely on its own (CiA 301 / CiA 402):
+
+- 0x1017 producer heartbeat time: the drive beats three times per heartbeat timeout, so the
+  master notices a dead drive.
+- 0x1016 consumer heartbeat time, sub-index 1: the master's node id and the heartbeat timeout.
+  The master beats from a thread of its own (``TableDrives``); a master that is killed, hangs
+  with the interpreter stuck, or loses the bus stops beating, and the drive notices by itself.
+- 0x6007 abort connection option code = 3: a lost master heartbeat means a quick stop.
+- 0x605A quick stop option code = 6: brake on the quick stop ramp (0x6085), then stay in QUICK
+  STOP ACTIVE holding the position under power; a stopped rod neither coasts nor swings.
+- 0x605B shutdown option code = 1 and 0x605C disable operation option code = 1: a shutdown or
+  disable-operation command from any tool brakes on the slow-down ramp (0x6084) before the
+  power stage goes off, instead of letting the rod coast.
+- 0x605E fault reaction option code = 2: a fault the drive can still brake through stops on
+  the quick stop ramp before the power stage goes off.
+- 0x6084 / 0x6085: both ramps at the joint's ``max_acceleration``, the hardest the targets
+  ever ask of it, so a stop from top speed takes ``max_speed / max_acceleration`` (80 ms for
+  the keeper's slide, 105 ms for its spin with the shipped limits).
+
+Every stop of the master brakes first and cuts power only once the drive reports standstill
+(:meth:`Cia402Drive.wait_until_stopped`): cutting it during the ramp would leave the rod
+coasting.
+
 The CiA 402 state machine is driven here over confirmed SDO writes rather than with
 ``canopen.profiles.p402.BaseNode402``: that helper cannot reset a fault without running into
 its own timeout, logs and swallows a failed mode change, and warns on every statusword read
@@ -22,6 +45,7 @@ Modes (``TableConfig.mode``):
 from __future__ import annotations
 
 import contextlib
+import logging
 import struct
 import threading
 import time
@@ -48,14 +72,21 @@ from canopen.sdo.exceptions import SdoError
 from foosball_gym.hardware.config import JointConfig
 from foosball_gym.hardware.safety import DriveFault
 
+logger = logging.getLogger(__name__)
+
 # Objects (CiA 301 communication, CiA 402 drive profile).
 DEVICE_TYPE = 0x1000
 ERROR_REGISTER = 0x1001
 COMMUNICATION_CYCLE_PERIOD = 0x1006
+CONSUMER_HEARTBEAT_TIME = 0x1016
 PRODUCER_HEARTBEAT_TIME = 0x1017
+ABORT_CONNECTION_OPTION_CODE = 0x6007
 CONTROLWORD = 0x6040
 STATUSWORD = 0x6041
 QUICK_STOP_OPTION_CODE = 0x605A
+SHUTDOWN_OPTION_CODE = 0x605B
+DISABLE_OPERATION_OPTION_CODE = 0x605C
+FAULT_REACTION_OPTION_CODE = 0x605E
 MODES_OF_OPERATION = 0x6060
 MODES_OF_OPERATION_DISPLAY = 0x6061
 POSITION_ACTUAL = 0x6064
@@ -80,6 +111,7 @@ CW_CHANGE_IMMEDIATELY = 0x20  # pp: the new target replaces the current one at o
 
 # Statusword bits.
 SW_FAULT = 0x0008
+SW_TARGET_REACHED = 0x0400  # in QUICK STOP ACTIVE: the drive has halted
 SW_SET_POINT_ACKNOWLEDGE = 0x1000  # pp
 
 MODE_CODES = {"pp": 1, "csp": 8}
@@ -87,6 +119,19 @@ DEVICE_PROFILE = 402
 # 0x605A = 6: slow down on the quick stop ramp, then stay in QUICK STOP ACTIVE, holding the
 # position under power (a stopped rod holds still rather than being free to swing).
 QUICK_STOP_AND_HOLD = 6
+# 0x605B, 0x605C = 1: slow down on the slow-down ramp, then switch the power stage off.
+SLOW_DOWN_THEN_DISABLE = 1
+# 0x605E = 2: the fault reaction brakes on the quick stop ramp.
+FAULT_REACTION_QUICK_STOP = 2
+# 0x6007 = 3: a lost connection to the master (its heartbeat) quick-stops the drive.
+ABORT_CONNECTION_QUICK_STOP = 3
+CONSUMER_HEARTBEAT_ENTRIES = 4
+# A drive turning slower than this fraction of its joint's top speed counts as standing still.
+STANDSTILL_FRACTION = 0.001
+# The wait for standstill ends at this multiple of the ramp's length plus STOP_SLACK_S, whatever
+# the drive reports.
+STOP_TIME_FACTOR = 1.5
+STOP_SLACK_S = 0.05
 
 OPERATION_ENABLED = "OPERATION ENABLED"
 NMT_OPERATIONAL = 5
@@ -117,8 +162,9 @@ def object_dictionary(node_id: int) -> ObjectDictionary:
     """The objects of a CiA 402 position drive this package uses, for one node.
 
     Enough for a master to address a real C5-E and for a ``canopen.LocalNode`` to play one:
-    device type, error register, cycle period, heartbeat, 4 RPDOs and 4 TPDOs (all disabled
-    and empty, as after a reset to factory settings), and the drive objects of both modes.
+    device type, error register, cycle period, producer and consumer heartbeat, 4 RPDOs and 4
+    TPDOs (all disabled and empty, as after a reset to factory settings), the stop reactions
+    (option codes) and the drive objects of both modes.
     """
     od = ObjectDictionary()
     od.node_id = node_id
@@ -130,7 +176,17 @@ def object_dictionary(node_id: int) -> ObjectDictionary:
         _variable("Producer heartbeat time", PRODUCER_HEARTBEAT_TIME, 0, UNSIGNED16),
         _variable("Controlword", CONTROLWORD, 0, UNSIGNED16),
         _variable("Statusword", STATUSWORD, 0, UNSIGNED16, "ro"),
+        _variable(
+            "Abort connection option code", ABORT_CONNECTION_OPTION_CODE, 0, INTEGER16, default=1
+        ),
         _variable("Quick stop option code", QUICK_STOP_OPTION_CODE, 0, INTEGER16, default=2),
+        _variable("Shutdown option code", SHUTDOWN_OPTION_CODE, 0, INTEGER16),
+        _variable(
+            "Disable operation option code", DISABLE_OPERATION_OPTION_CODE, 0, INTEGER16, default=1
+        ),
+        _variable(
+            "Fault reaction option code", FAULT_REACTION_OPTION_CODE, 0, INTEGER16, default=2
+        ),
         _variable("Modes of operation", MODES_OF_OPERATION, 0, INTEGER8),
         _variable("Modes of operation display", MODES_OF_OPERATION_DISPLAY, 0, INTEGER8, "ro"),
         _variable("Position actual value", POSITION_ACTUAL, 0, INTEGER32, "ro"),
@@ -150,6 +206,15 @@ def object_dictionary(node_id: int) -> ObjectDictionary:
         ),
     ):
         od.add_object(var)
+    index = CONSUMER_HEARTBEAT_TIME
+    consumers = ODRecord("Consumer heartbeat time", index)
+    consumers.add_member(
+        _variable("Highest sub-index", index, 0, UNSIGNED8, "const", CONSUMER_HEARTBEAT_ENTRIES)
+    )
+    for sub in range(1, CONSUMER_HEARTBEAT_ENTRIES + 1):
+        # Bits 16-23: the node id watched; bits 0-15: its heartbeat timeout in ms (0: off).
+        consumers.add_member(_variable(f"Consumer heartbeat {sub}", index, sub, UNSIGNED32))
+    od.add_object(consumers)
     index = INTERPOLATION_TIME_PERIOD
     interpolation = ODRecord("Interpolation time period", index)
     interpolation.add_member(_variable("Highest sub-index", index, 0, UNSIGNED8, "const", 2))
@@ -187,10 +252,14 @@ class Cia402Drive:
         joint: the joint it moves and its calibration.
         mode: ``"csp"`` or ``"pp"``.
         control_hz: the control rate (the SYNC rate in csp).
-        heartbeat_timeout_s: how old the drive's last heartbeat may be.
+        heartbeat_timeout_s: how old the drive's last heartbeat may be, and how old the
+            master's may be before the drive quick-stops itself.
+        master_node_id: the node id the master's heartbeat comes from; None leaves the drive's
+            consumer heartbeat alone.
 
     Every method that talks to the drive raises :class:`DriveFault` (node id and reason) when
-    the drive does not answer or refuses.
+    the drive does not answer or refuses. The methods may be called from several threads (the
+    play loop, the command guard): one transfer or handshake with the drive at a time.
     """
 
     STATE_TIMEOUT_S = 0.5  # per CiA 402 transition, and for the mode display to follow
@@ -204,6 +273,7 @@ class Cia402Drive:
         mode: str,
         control_hz: float,
         heartbeat_timeout_s: float,
+        master_node_id: int | None = None,
     ) -> None:
         if mode not in MODE_CODES:
             raise ValueError(f"unknown drive mode {mode!r}; allowed: {', '.join(MODE_CODES)}")
@@ -211,6 +281,11 @@ class Cia402Drive:
         self.mode = mode
         self.control_hz = control_hz
         self.heartbeat_timeout_s = heartbeat_timeout_s
+        self.master_node_id = master_node_id
+        # An SDO client serves one transfer at a time; a quick stop from the guard's thread
+        # must also never land inside the play loop's set-point handshake, whose last write
+        # would enable the drive again.
+        self._lock = threading.RLock()
         self.node = canopen.RemoteNode(joint.node_id, object_dictionary(joint.node_id))
         network.add_node(self.node)
         self.network = network
@@ -277,12 +352,12 @@ class Cia402Drive:
             raise DriveFault(self.joint, f"{what} failed: {e}") from e
 
     def _read(self, index: int, subindex: int | None = None) -> int:
-        with self._talking(f"reading 0x{index:04X}"):
+        with self._lock, self._talking(f"reading 0x{index:04X}"):
             obj = self.node.sdo[index]
             return (obj if subindex is None else obj[subindex]).raw
 
     def _write(self, index: int, value: int, subindex: int | None = None) -> None:
-        with self._talking(f"writing 0x{index:04X} = {value}"):
+        with self._lock, self._talking(f"writing 0x{index:04X} = {value}"):
             obj = self.node.sdo[index]
             (obj if subindex is None else obj[subindex]).raw = value
 
@@ -312,9 +387,10 @@ class Cia402Drive:
         """Take the drive from any state to "operation enabled" in the configured mode.
 
         NMT pre-operational; check it is a CiA 402 device; fault reset or disable down to
-        "switch on disabled"; heartbeat, quick stop reaction, the mode's PDOs or profile; mode
-        of operation, checked on its display; target = actual position, so it does not move;
-        NMT operational (confirmed by its heartbeat); shutdown, switch on, enable operation.
+        "switch on disabled"; heartbeats (its own, and watching the master's), the stop
+        reactions and ramps (see the module's docstring), the mode's PDOs or profile; mode of
+        operation, checked on its display; target = actual position, so it does not move; NMT
+        operational (confirmed by its heartbeat); shutdown, switch on, enable operation.
 
         Returns:
             The joint's position (m or rad) when it was enabled.
@@ -338,9 +414,19 @@ class Cia402Drive:
         joint = self.joint
         period_ms = max(1, round(self.heartbeat_timeout_s * 1000 / 3))
         self._write(PRODUCER_HEARTBEAT_TIME, period_ms)
+        if self.master_node_id is not None:
+            timeout_ms = min(0xFFFF, max(1, round(self.heartbeat_timeout_s * 1000)))
+            self._write(
+                CONSUMER_HEARTBEAT_TIME, (self.master_node_id << 16) | timeout_ms, subindex=1
+            )
+            self._write(ABORT_CONNECTION_OPTION_CODE, ABORT_CONNECTION_QUICK_STOP)
         self._write(QUICK_STOP_OPTION_CODE, QUICK_STOP_AND_HOLD)
+        self._write(SHUTDOWN_OPTION_CODE, SLOW_DOWN_THEN_DISABLE)
+        self._write(DISABLE_OPERATION_OPTION_CODE, SLOW_DOWN_THEN_DISABLE)
+        self._write(FAULT_REACTION_OPTION_CODE, FAULT_REACTION_QUICK_STOP)
         acceleration = abs(joint.speed_to_increments(joint.max_acceleration))
         self._write(QUICK_STOP_DECELERATION, acceleration)
+        self._write(PROFILE_DECELERATION, acceleration)
         if self.mode == "csp":
             self._configure_pdos()
             self._write(COMMUNICATION_CYCLE_PERIOD, round(1e6 / self.control_hz))
@@ -350,7 +436,6 @@ class Cia402Drive:
         else:
             self._write(PROFILE_VELOCITY, abs(joint.speed_to_increments(joint.max_speed)))
             self._write(PROFILE_ACCELERATION, acceleration)
-            self._write(PROFILE_DECELERATION, acceleration)
         self._set_mode()
         position = self._read(POSITION_ACTUAL)
         self._write(TARGET_POSITION, position)
@@ -465,25 +550,32 @@ class Cia402Drive:
         handshake, confirmed by the drive.
         """
         increments = self.joint.to_increments(value)
-        if self._pdo:
-            with self._talking("sending RPDO1"):
-                self._target.raw = increments
-                self._rpdo.transmit()
-            return
-        base = CW_ENABLE_OPERATION | CW_CHANGE_IMMEDIATELY
-        self._write(TARGET_POSITION, increments)
-        self._write(CONTROLWORD, base | CW_NEW_SET_POINT)
-        deadline = time.monotonic() + 1.0 / self.control_hz
-        # Bit 4 must stay up until the drive has seen it; a fault ends the wait early and is
-        # reported by fault_reason().
-        while not (statusword := self._read_statusword()) & (SW_SET_POINT_ACKNOWLEDGE | SW_FAULT):
-            if time.monotonic() > deadline:
-                raise DriveFault(
-                    self.joint,
-                    f"did not acknowledge the set-point within one control period "
-                    f"(statusword 0x{statusword:04X})",
-                )
-        self._write(CONTROLWORD, base)
+        with self._lock:
+            if not self.enabled:
+                # Stopped meanwhile (by the guard's thread): the handshake's controlword would
+                # take the drive out of QUICK STOP ACTIVE again.
+                return
+            if self._pdo:
+                with self._talking("sending RPDO1"):
+                    self._target.raw = increments
+                    self._rpdo.transmit()
+                return
+            base = CW_ENABLE_OPERATION | CW_CHANGE_IMMEDIATELY
+            self._write(TARGET_POSITION, increments)
+            self._write(CONTROLWORD, base | CW_NEW_SET_POINT)
+            deadline = time.monotonic() + 1.0 / self.control_hz
+            # Bit 4 must stay up until the drive has seen it; a fault ends the wait early and
+            # is reported by fault_reason().
+            while not (statusword := self._read_statusword()) & (
+                SW_SET_POINT_ACKNOWLEDGE | SW_FAULT
+            ):
+                if time.monotonic() > deadline:
+                    raise DriveFault(
+                        self.joint,
+                        f"did not acknowledge the set-point within one control period "
+                        f"(statusword 0x{statusword:04X})",
+                    )
+            self._write(CONTROLWORD, base)
 
     def mark_sync(self) -> None:
         """Note that a SYNC is about to go out: :meth:`actual` waits for the answer to it."""
@@ -515,48 +607,90 @@ class Cia402Drive:
                     joint.from_increments(self._position),
                     joint.speed_from_increments(self._velocity),
                 )
-        position = self._read(POSITION_ACTUAL)
-        velocity = self._read(VELOCITY_ACTUAL)
+        with self._lock:
+            position = self._read(POSITION_ACTUAL)
+            velocity = self._read(VELOCITY_ACTUAL)
         return joint.from_increments(position), joint.speed_from_increments(velocity)
 
     # ------------------------------------------------------------------ stopping
 
     def quick_stop(self) -> None:
         """Quick stop: the drive brakes on its quick stop ramp and holds the position."""
-        self.enabled = False
-        self._write(CONTROLWORD, CW_QUICK_STOP)
+        with self._lock:
+            self.enabled = False
+            self._write(CONTROLWORD, CW_QUICK_STOP)
+
+    @property
+    def stop_time_s(self) -> float:
+        """How long a quick stop from the joint's top speed takes on the configured ramp."""
+        return self.joint.max_speed / self.joint.max_acceleration
+
+    def wait_until_stopped(self) -> bool:
+        """Wait until a quick-stopped drive reports standstill.
+
+        Standstill: QUICK STOP ACTIVE with the statusword's target-reached bit (the drive has
+        halted) or an actual velocity near 0. A drive that left QUICK STOP ACTIVE by itself (a
+        fault, or an option code that switches off after the ramp) is not waited for. The wait
+        is bounded by :data:`STOP_TIME_FACTOR` times :attr:`stop_time_s` plus
+        :data:`STOP_SLACK_S`.
+
+        Returns:
+            True if the drive reported standstill, False if the bound passed first.
+        """
+        joint = self.joint
+        slow = STANDSTILL_FRACTION * abs(joint.speed_to_increments(joint.max_speed))
+        deadline = time.monotonic() + STOP_TIME_FACTOR * self.stop_time_s + STOP_SLACK_S
+        while True:
+            with self._lock:
+                statusword = self._read_statusword()
+                if state_name(statusword) != "QUICK STOP ACTIVE":
+                    return True
+                if statusword & SW_TARGET_REACHED or abs(self._read(VELOCITY_ACTUAL)) <= slow:
+                    return True
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(self.POLL_S)
 
     def disable(self) -> str:
-        """Take the drive out of "operation enabled" (power stage off).
+        """Brake to standstill, then take the power stage off.
 
-        From "operation enabled" by a shutdown, which lets a drive set up for it brake on its
-        slow-down ramp first; from "quick stop active" by disabling the voltage (shutdown is
-        no transition there).
+        A drive in "operation enabled" is quick-stopped first; one in "quick stop active"
+        is disabled (disable voltage: shutdown is no transition there) only once it reports
+        standstill, or the ramp's time bound passed (logged), so the rod brakes and never
+        coasts. "Switched on" drives no motor and goes down by a shutdown.
 
         Returns:
             The state the drive is left in.
         """
-        self.enabled = False
-        state = state_name(self._read_statusword())
-        if state == "QUICK STOP ACTIVE":
-            self._write(CONTROLWORD, CW_DISABLE_VOLTAGE)
-        elif state in (OPERATION_ENABLED, "SWITCHED ON"):
-            self._write(CONTROLWORD, CW_SHUTDOWN)
-            deadline = time.monotonic() + self.STATE_TIMEOUT_S
-            powered = (OPERATION_ENABLED, "SWITCHED ON")
-            while state_name(self._read_statusword()) in powered:
-                if time.monotonic() > deadline:
+        with self._lock:
+            self.enabled = False
+            state = state_name(self._read_statusword())
+            if state == OPERATION_ENABLED:
+                self.quick_stop()
+                state = "QUICK STOP ACTIVE"
+            if state == "QUICK STOP ACTIVE":
+                if not self.wait_until_stopped():
+                    logger.warning(
+                        "%s: no standstill reported within %.0f ms of the quick stop; "
+                        "switching off anyway",
+                        self.joint.label,
+                        1e3 * (STOP_TIME_FACTOR * self.stop_time_s + STOP_SLACK_S),
+                    )
+                if state_name(self._read_statusword()) == "QUICK STOP ACTIVE":
                     self._write(CONTROLWORD, CW_DISABLE_VOLTAGE)
-                    break
-                time.sleep(self.POLL_S)
-        return state_name(self._read_statusword())
+            elif state == "SWITCHED ON":
+                self._write(CONTROLWORD, CW_SHUTDOWN)
+            return state_name(self._read_statusword())
 
     def release(self) -> None:
-        """Stop watching the drive and send it back to NMT pre-operational (no PDOs)."""
+        """Stop watching the drive, let it stop watching the master (whose heartbeat ends
+        next), and send it back to NMT pre-operational (no PDOs)."""
         self._pdo = False
         with self._changed:
             self._expect_nmt = None
-        with self._talking("NMT pre-operational"):
+        if self.master_node_id is not None:
+            self._write(CONSUMER_HEARTBEAT_TIME, 0, subindex=1)
+        with self._lock, self._talking("NMT pre-operational"):
             self.node.nmt.state = "PRE-OPERATIONAL"
 
     # ------------------------------------------------------------------ faults

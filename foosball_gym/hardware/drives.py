@@ -12,24 +12,39 @@
             drives.feed_state(now)         # a fresh state estimate arrived
             drives.check(now)
 
-Leaving the ``with`` block, normally or by any exception (Ctrl-C included), disables every
-drive and re-raises. A fault on any drive, or a watchdog that trips, quick-stops every drive
-and raises :class:`~foosball_gym.hardware.safety.DriveFault` or
+Leaving the ``with`` block, normally or by any exception (Ctrl-C included), brakes every
+drive to standstill, then disables it, and re-raises. A fault on any drive, or a watchdog that
+trips, quick-stops every drive (it brakes on its ramp and holds) and raises
+:class:`~foosball_gym.hardware.safety.DriveFault` or
 :class:`~foosball_gym.hardware.safety.WatchdogTripped`; the table stays stopped, and every
 later call raises the same error, until :meth:`TableDrives.bring_up` runs again.
+
+Two supervisors do not depend on the loop calling in:
+
+- the command guard (:class:`~foosball_gym.hardware.safety.CommandGuard`), a thread that
+  quick-stops every drive when no command went out for ``watchdog_s`` on the table's clock,
+  whatever the loop is doing (a policy that blocks, a camera that hangs);
+- the master's heartbeat (:class:`MasterHeartbeat`), sent from a thread of its own and with
+  every command; each drive is set up to quick-stop itself when it misses it for
+  ``heartbeat_timeout_s`` (objects 0x1016 and 0x6007, see :mod:`~foosball_gym.hardware.cia402`),
+  which covers a master that was killed, whose interpreter is stuck, or that lost the bus.
 """
 
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from collections.abc import Callable, Mapping
 from types import TracebackType
 
+import can
 import canopen
 
 from foosball_gym.hardware.cia402 import Cia402Drive
 from foosball_gym.hardware.config import Joint, TableConfig
 from foosball_gym.hardware.safety import (
+    CommandGuard,
     DriveFault,
     JointLimits,
     SafetyError,
@@ -45,22 +60,106 @@ logger = logging.getLogger(__name__)
 # How long the receive thread may take to notice a closed network; the default (1 s) would
 # make every close wait that long.
 NOTIFIER_CYCLE_S = 0.1
+# The master's node id when the configuration names none: the highest, which no drive of a
+# table takes.
+DEFAULT_MASTER_NODE_ID = 127
+NMT_OPERATIONAL = 0x05
+HEARTBEAT_BASE = 0x700
+
+
+class MasterHeartbeat:
+    """The master's CiA 301 heartbeat (COB-ID 0x700 + node id, state "operational").
+
+    Sent from a thread every ``period_s`` of wall time (a producer heartbeat, 0x1017's job on
+    a device) and by :meth:`beat` whenever the caller wants (every command): the drives watch
+    it with their consumer heartbeat (0x1016). It lives as long as the master's process does;
+    a kernel-side periodic send (socketcan's broadcast manager) would outlive a hung
+    interpreter, which is exactly what the drives must notice.
+
+    Args:
+        network: the master's connected network.
+        node_id: the master's node id.
+        period_s: the longest gap between two beats.
+    """
+
+    def __init__(self, network: canopen.Network, node_id: int, period_s: float) -> None:
+        if period_s <= 0:
+            raise ValueError(f"the heartbeat period must be positive, got {period_s}")
+        self.network = network
+        self.node_id = node_id
+        self.period_s = period_s
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+        self._last = -float("inf")
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def start(self) -> None:
+        """Start beating (once; a stopped heartbeat stays stopped)."""
+        if self._thread is None and not self._stop.is_set():
+            self.beat()
+            self._thread = threading.Thread(target=self._run, name="master-heartbeat", daemon=True)
+            self._thread.start()
+
+    def beat(self) -> None:
+        """Send one beat now (nothing once stopped)."""
+        if self._stop.is_set():
+            return
+        with self._lock:
+            self._last = time.monotonic()
+            self.network.send_message(HEARTBEAT_BASE + self.node_id, bytes([NMT_OPERATIONAL]))
+
+    def stop(self) -> None:
+        """Stop beating and wait for the thread; safe to call twice."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join()
+
+    def _run(self) -> None:
+        poll = min(self.period_s / 4, 0.01)
+        while not self._stop.wait(poll):
+            if time.monotonic() - self._last < self.period_s - poll:
+                continue
+            try:
+                self.beat()
+            except (RuntimeError, can.CanError, OSError) as e:
+                # The bus is gone: the drives will notice the silence, which is the point.
+                logger.warning("master heartbeat stopped: %s", e)
+                return
 
 
 class TableDrives:
     """The table's drives, with limits, rate limits, a watchdog and one stop for all.
 
     Args:
-        config: the table configuration.
+        config: the table configuration. The master's node id is ``config.master_node_id``
+            where the configuration has one, else :data:`DEFAULT_MASTER_NODE_ID`.
         network: a connected ``canopen.Network`` to use; by default one is opened on
             ``config.bus`` and closed by :meth:`close`.
+        clock: the table's clock (seconds) the command guard measures the silence on: the
+            wall clock for a real table or one simulated in real time, the simulated time in
+            lock-step. :meth:`use_clock` changes it.
 
     Attributes:
         drives: one :class:`Cia402Drive` per configured joint, by ``(rod, joint)``.
         watchdog: the :class:`Watchdog` fed by :meth:`command` and :meth:`feed_state`.
+        guard: the :class:`CommandGuard`, fed by :meth:`command`.
+        heartbeat: the :class:`MasterHeartbeat`, started by :meth:`bring_up`.
     """
 
-    def __init__(self, config: TableConfig, network: canopen.Network | None = None) -> None:
+    def __init__(
+        self,
+        config: TableConfig,
+        network: canopen.Network | None = None,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        master_node_id = getattr(config, "master_node_id", DEFAULT_MASTER_NODE_ID)
+        if master_node_id in {joint.node_id for joint in config.joints}:
+            raise ValueError(f"the master's node id {master_node_id} is also a drive's")
         self.config = config
         self._own_network = network is None
         if network is None:
@@ -78,12 +177,15 @@ class TableDrives:
                     mode=config.mode,
                     control_hz=config.control_hz,
                     heartbeat_timeout_s=config.heartbeat_timeout_s,
+                    master_node_id=master_node_id,
                 )
                 for joint in config.joints
             }
         except BaseException:
             self._disconnect()
             raise
+        self.heartbeat = MasterHeartbeat(network, master_node_id, config.heartbeat_timeout_s / 3)
+        self.guard = CommandGuard(config.watchdog_s, self._on_silence, clock)
         self._limiters = {
             joint.key: TargetLimiter(JointLimits.of(joint), config.control_period)
             for joint in config.joints
@@ -116,16 +218,21 @@ class TableDrives:
     def bring_up(self) -> dict[Joint, float]:
         """Bring every drive to "operation enabled" and start from where the rods are.
 
-        Clears a tripped safety latch and the watchdog (a stopped table is restarted this
-        way). If a drive fails, the others are disabled again before the error is raised.
+        Clears a tripped safety latch and the watchdogs (a stopped table is restarted this
+        way), and starts the master's heartbeat and the command guard, which arms on the first
+        command. If a drive fails, the others are disabled again before the error is raised.
 
         Returns:
             Each joint's position (m or rad) at bring-up.
         """
         self._check_open()
         self._running = False
+        self.guard.disarm()
         self._latch.reset()
         self.watchdog.reset()
+        # Beating before the drives watch it: they start watching at the first beat they hear.
+        self.heartbeat.start()
+        self.guard.start()
         positions = {}
         try:
             for key, drive in self.drives.items():
@@ -179,6 +286,10 @@ class TableDrives:
                 self.network.sync.transmit()
         except DriveFault as e:
             self._latch.trip(e)
+        # The guard's thread may have stopped the drives while these went out.
+        self._latch.check()
+        self.guard.feed()
+        self.heartbeat.beat()
         self.watchdog.feed_command(now)
         return sent
 
@@ -222,8 +333,13 @@ class TableDrives:
         self._check_open()
         self._quick_stop_all()
 
+    def use_clock(self, clock: Callable[[], float]) -> None:
+        """Let the command guard measure on the table's ``clock`` from now on."""
+        self.guard.use_clock(clock)
+
     def close(self) -> None:
-        """Disable every drive, send it to NMT pre-operational and close the bus.
+        """Brake every drive to standstill, disable it, send it to NMT pre-operational, stop
+        the master's heartbeat and close the bus.
 
         Every drive is tried, even when one fails or Ctrl-C arrives meanwhile; the failures
         are raised afterwards. Safe to call twice.
@@ -231,6 +347,7 @@ class TableDrives:
         if self._closed:
             return
         self._closed = True
+        self.guard.stop()
         interrupt = None
         try:
             self._disable_all(raise_errors=True)
@@ -240,8 +357,10 @@ class TableDrives:
             for drive in self.drives.values():
                 try:
                     drive.release()
-                except DriveFault as e:
-                    logger.warning("%s", e)
+                except Exception as e:  # every drive is tried, and the bus may be gone
+                    logger.warning("%s: %s", drive.joint.label, e)
+            # The drives stopped watching it in release().
+            self.heartbeat.stop()
             self._disconnect()
         if interrupt is not None:
             raise interrupt
@@ -255,14 +374,30 @@ class TableDrives:
     def _quick_stop_all(self, last: int | None = None) -> None:
         """Quick-stop every drive, node ``last`` after the others."""
         self._running = False
+        self.guard.disarm()
         self._for_every_drive(Cia402Drive.quick_stop, "quick stop", raise_errors=True, last=last)
 
     def _stop_for(self, error: SafetyError) -> None:
         # A faulty drive may not answer, and waiting for it must not delay stopping the rest.
         self._quick_stop_all(last=getattr(error, "node_id", None))
 
+    def _on_silence(self, age: float) -> None:
+        """The guard's thread: no command for longer than the watchdog allows."""
+        if not self._running:
+            return
+        error = WatchdogTripped("command", age, self.guard.timeout)
+        logger.error("%s: stopping every drive from the command guard", error)
+        try:
+            self._latch.trip(error)
+        except SafetyError:
+            pass  # the play loop raises it at its next call
+
     def _disable_all(self, *, raise_errors: bool) -> None:
+        """Quick-stop every drive at once, then disable each as it reports standstill: they
+        all brake together, so the wait is that of the slowest."""
         self._running = False
+        self.guard.disarm()
+        self._for_every_drive(Cia402Drive.quick_stop, "quick stop", raise_errors=False)
         self._for_every_drive(Cia402Drive.disable, "disable", raise_errors=raise_errors)
 
     def _for_every_drive(
@@ -292,5 +427,5 @@ class TableDrives:
             logger.error("%s", message)
 
     def _disconnect(self) -> None:
-        if self._own_network:
+        if self._own_network and self.network.bus is not None:
             self.network.disconnect()

@@ -1,24 +1,33 @@
-"""Safety in the driver, not in the policy: limits, rate limits, a watchdog, one stop for all.
+"""Safety in the driver, not in the policy: limits, rate limits, watchdogs, one stop for all.
 
-Pure logic, no CAN: :mod:`foosball_gym.hardware.drives` puts it between the play loop and the
-drives, and the tests drive it with made-up timestamps.
+No CAN: :mod:`foosball_gym.hardware.drives` puts it between the play loop and the drives, and
+the tests drive it with made-up timestamps.
 
 - :class:`TargetLimiter` turns whatever a policy asks for into targets that stay inside the
   joint limits minus a margin, never move faster than the joint's top speed and change speed no
   faster than its acceleration allows, one control period at a time.
-- :class:`Watchdog` trips when the last command or the last state estimate is too old.
-- :class:`SafetyLatch` stops every drive once, on the first error, and keeps raising that
-  error until the drives are brought up again.
+- :class:`Watchdog` trips when the last command or the last state estimate is too old; the
+  play loop's own calls check it.
+- :class:`CommandGuard` checks the age of the last command from a thread of its own, so a
+  loop that hangs (a policy that blocks, a stuck camera) stops the table within the watchdog
+  period instead of at its next call.
+- :class:`SafetyLatch` stops every drive once, on the first error from whichever thread, and
+  keeps raising that error until the drives are brought up again.
 """
 
 from __future__ import annotations
 
+import logging
 import math
+import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NoReturn
 
 from foosball_gym.hardware.config import JointConfig
+
+logger = logging.getLogger(__name__)
 
 
 class SafetyError(RuntimeError):
@@ -192,8 +201,94 @@ class Watchdog:
                 raise WatchdogTripped(what, age, self.timeout)
 
 
+class CommandGuard:
+    """Calls ``on_silence`` from its own thread when no command came for ``timeout`` seconds.
+
+    Armed by the first :meth:`feed` after :meth:`disarm`; it disarms itself when it fires, so
+    it fires once per silence.
+
+    Args:
+        timeout: the oldest the last command may be, in seconds.
+        on_silence: called with the last command's age; what it raises is logged.
+        clock: the table's clock, seconds: the wall clock for a real table or one simulated in
+            real time, the simulated time in lock-step (where the world waits for the loop).
+        poll_s: how often the thread looks; by default a tenth of ``timeout``, 1 to 5 ms.
+    """
+
+    def __init__(
+        self,
+        timeout: float,
+        on_silence: Callable[[float], None],
+        clock: Callable[[], float] = time.monotonic,
+        poll_s: float | None = None,
+    ) -> None:
+        if timeout <= 0:
+            raise ValueError(f"the guard's timeout must be positive, got {timeout}")
+        self.timeout = timeout
+        self.clock = clock
+        self.poll_s = poll_s if poll_s is not None else min(max(timeout / 10, 0.001), 0.005)
+        self._on_silence = on_silence
+        self._lock = threading.Lock()
+        self._last: float | None = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def armed(self) -> bool:
+        return self._last is not None
+
+    def start(self) -> None:
+        """Start the thread (once; a stopped guard stays stopped)."""
+        if self._thread is None and not self._stop.is_set():
+            self._thread = threading.Thread(target=self._run, name="command-guard", daemon=True)
+            self._thread.start()
+
+    def feed(self) -> None:
+        """A command went out now."""
+        with self._lock:
+            self._last = self.clock()
+
+    def disarm(self) -> None:
+        with self._lock:
+            self._last = None
+
+    def use_clock(self, clock: Callable[[], float]) -> None:
+        """Measure on another clock from now on (disarmed until the next command)."""
+        with self._lock:
+            self.clock = clock
+            self._last = None
+
+    def stop(self) -> None:
+        """Stop the thread and wait for it; safe to call twice."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join()
+
+    def check(self) -> float | None:
+        """Fire if the last command is too old; the age it fired at, else None."""
+        with self._lock:
+            if self._last is None:
+                return None
+            age = self.clock() - self._last
+            if age <= self.timeout:
+                return None
+            self._last = None
+        try:
+            self._on_silence(age)
+        except Exception:
+            logger.exception("the command guard could not stop the table")
+        return age
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.poll_s):
+            self.check()
+
+
 class SafetyLatch:
     """Stops everything once, on the first safety error, and remembers it.
+
+    Thread-safe: the play loop and the command guard may trip it at the same time; one of
+    them stops the drives, and both raise the first error.
 
     Args:
         stop_all: stops every drive, given the error that calls for it; it should try every
@@ -202,19 +297,21 @@ class SafetyLatch:
 
     def __init__(self, stop_all: Callable[[SafetyError], None]) -> None:
         self._stop_all = stop_all
+        self._lock = threading.RLock()
         self.error: SafetyError | None = None
 
     def trip(self, error: SafetyError) -> NoReturn:
         """Stop every drive (the first time) and raise ``error``."""
-        if self.error is None:
-            self.error = error
-            try:
-                self._stop_all(error)
-            except Exception as e:
-                # The first error is the one to report; a drive that did not take the stop is
-                # part of it.
-                raise error from e
-        raise self.error
+        with self._lock:
+            if self.error is None:
+                self.error = error
+                try:
+                    self._stop_all(error)
+                except Exception as e:
+                    # The first error is the one to report; a drive that did not take the stop
+                    # is part of it.
+                    raise error from e
+            raise self.error
 
     def check(self) -> None:
         """Raise the error that tripped the latch, if any."""
@@ -222,4 +319,5 @@ class SafetyLatch:
             raise self.error
 
     def reset(self) -> None:
-        self.error = None
+        with self._lock:
+            self.error = None

@@ -5,8 +5,28 @@
 and heartbeat, SDO access to its objects, PDOs as the master maps them (synchronous RPDOs are
 taken on SYNC), the CiA 402 state machine driven by the controlword, modes 1 (profile
 position) and 8 (cyclic synchronous position) with their display, EMCY on faults. Behind it,
-each node's joint of a :class:`~foosball_gym.simulator.TableSim` follows the node's target;
-a node that is not in "operation enabled" (quick stop included) holds its joint where it was.
+each node's joint of a :class:`~foosball_gym.simulator.TableSim` follows the node's target.
+
+How a drive stops, as its objects say (see :mod:`foosball_gym.hardware.cia402`):
+
+- a quick stop (controlword, or a lost master heartbeat with 0x6007 = 3) brakes from the
+  joint's velocity at the quick stop deceleration (0x6085) or, for option codes 1 and 5 of
+  0x605A, the profile deceleration (0x6084); codes 5-8 then hold the joint in QUICK STOP ACTIVE
+  (statusword bit 10 set once halted), codes 1-4 switch off after the ramp, code 0 at once;
+- shutdown and disable operation from "operation enabled" brake on the slow-down ramp first
+  with option code 1 (0x605B, 0x605C), and cut the power at once with 0; a fault likewise
+  brakes per 0x605E (the state shows FAULT at once, not FAULT REACTION ACTIVE);
+- a drive whose power stage is off does not hold its joint: it coasts on at the velocity it
+  had when the power went (the joints of the simulation have no friction to speak of), until
+  an end stop; one at rest stays at rest.
+
+Consumer heartbeat (0x1016): a drive watches each node id configured there from the first
+heartbeat it hears from it; when one is older than its time, it sends EMCY 0x8130 and reacts
+as 0x6007 says (1 fault, 2 disable voltage, 3 quick stop). The age is measured on the table's
+``clock``, checked once per control step.
+
+Every controlword, PDO, SYNC and stop a drive sees is kept in :attr:`SimulatedDrive.events`
+with the table's time, so tests can tell what happened in which order.
 
 The caller steps the simulation; one control step in lockstep is:
 
@@ -24,8 +44,12 @@ This is the only hardware-side module that uses the simulator, and it only calls
 
 from __future__ import annotations
 
+import collections
+import math
 import threading
-from collections.abc import Mapping
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import canopen
@@ -34,18 +58,29 @@ from canopen.pdo import PdoMap
 from canopen.sdo import SdoAbortedError
 
 from foosball_gym.hardware.cia402 import (
+    ABORT_CONNECTION_OPTION_CODE,
+    CONSUMER_HEARTBEAT_TIME,
     CONTROLWORD,
+    CW_DISABLE_VOLTAGE,
     CW_FAULT_RESET,
     CW_NEW_SET_POINT,
+    CW_QUICK_STOP,
+    DISABLE_OPERATION_OPTION_CODE,
     ERROR_REGISTER,
+    FAULT_REACTION_OPTION_CODE,
     MODE_CODES,
     MODES_OF_OPERATION,
     MODES_OF_OPERATION_DISPLAY,
     OPERATION_ENABLED,
     POSITION_ACTUAL,
     PROFILE_ACCELERATION,
+    PROFILE_DECELERATION,
     PROFILE_VELOCITY,
+    QUICK_STOP_DECELERATION,
+    QUICK_STOP_OPTION_CODE,
+    SHUTDOWN_OPTION_CODE,
     STATUSWORD,
+    SW_TARGET_REACHED,
     TARGET_POSITION,
     VELOCITY_ACTUAL,
     object_dictionary,
@@ -63,6 +98,9 @@ FLUSH_TIMEOUT_S = 1.0
 NOTIFIER_CYCLE_S = 0.1
 SYNC_ID = 0x80
 NMT_ID = 0x000
+HEARTBEAT_BASE = 0x700
+EMCY_HEARTBEAT_LOST = 0x8130  # CiA 301: life guard or heartbeat error
+EVENTS_KEPT = 10_000
 
 CSP = MODE_CODES["csp"]
 PP = MODE_CODES["pp"]
@@ -82,9 +120,33 @@ STATE_BITS = {
     FAULT: 0x08,
 }
 SW_REMOTE = 0x0200
+# The drive function (power stage driving the motor) is on in these states.
+POWERED = (OPERATION_ENABLED, QUICK_STOP)
 SW_BIT12 = 0x1000  # pp: set-point acknowledge; csp: the drive follows the command value
 ERROR_REGISTER_GENERIC = 0x01
 SDO_ABORT_VALUE_RANGE = 0x06090030
+
+
+@dataclass(frozen=True)
+class DriveEvent:
+    """Something a simulated drive saw or did.
+
+    Attributes:
+        t: the table's time.
+        what: ``"controlword"``, ``"rpdo"``, ``"sync"``, ``"master heartbeat lost"``,
+            ``"halted"`` (a stop ramp ended), ``"power off"`` (the power stage went off).
+        value: the controlword written, the node id whose heartbeat was lost, else None.
+        state: the CiA 402 state after it.
+        statusword: the statusword the master could read just before it.
+        speed: how fast the drive was moving the joint just before it (increments/s).
+    """
+
+    t: float
+    what: str
+    value: int | None
+    state: str
+    statusword: int
+    speed: float
 
 
 class SimulatedDrive:
@@ -94,7 +156,9 @@ class SimulatedDrive:
         joint: the joint it moves.
         lock: guards the drive's state between the bus's receive thread and the caller.
         position: the joint's position (m or rad) at power-on.
-        dt: the simulation's control step, the period of the pp profile.
+        dt: the simulation's control step, the period of the pp profile and the ramps.
+        clock: the table's clock, for the events and the consumer heartbeat.
+        on_watch: called with a node id the drive is told to watch the heartbeat of.
 
     Attributes (in drive units):
         node: the ``canopen.LocalNode``.
@@ -104,13 +168,25 @@ class SimulatedDrive:
         target_position: object 0x607A as last written.
         target: the position, in increments, the joint is driven to (or held at).
         position, velocity: the joint's state as last published, in increments (per s).
+        motion: ``"driven"`` (following its target), ``"ramp"`` (braking), ``"hold"``
+            (halted under power) or ``"free"`` (power stage off: coasting, or at rest).
+        speed: the drive's own velocity in a ramp or while coasting (increments/s).
+        events: what it saw and did (:class:`DriveEvent`), oldest first.
     """
 
     def __init__(
-        self, joint: JointConfig, lock: threading.RLock, position: float, dt: float
+        self,
+        joint: JointConfig,
+        lock: threading.RLock,
+        position: float,
+        dt: float,
+        clock: Callable[[], float] = time.monotonic,
+        on_watch: Callable[[int], None] | None = None,
     ) -> None:
         self.joint = joint
         self._dt = dt
+        self.clock = clock
+        self._on_watch = on_watch
         self.node = canopen.LocalNode(joint.node_id, object_dictionary(joint.node_id))
         self._lock = lock
         self.state = SOD
@@ -127,6 +203,28 @@ class SimulatedDrive:
         self._profile_acceleration = 0
         self._profile: TargetLimiter | None = None
         self._pending: dict[tuple[int, int], bytes] = {}  # synchronous RPDO data until SYNC
+        self.motion = "free"
+        self.speed = 0.0
+        self._setpoint = float(self.position)  # where a ramp or coasting has the joint
+        self._deceleration = 0.0
+        self._after_ramp: str | None = None  # the state a ramp ends in; None: hold
+        od = self.node.object_dictionary
+        self._options = {
+            index: od[index].default
+            for index in (
+                QUICK_STOP_OPTION_CODE,
+                SHUTDOWN_OPTION_CODE,
+                DISABLE_OPERATION_OPTION_CODE,
+                FAULT_REACTION_OPTION_CODE,
+                ABORT_CONNECTION_OPTION_CODE,
+            )
+        }
+        self._quick_stop_deceleration = 0
+        self._profile_deceleration = 0
+        self._watched: dict[int, tuple[int, float]] = {}  # sub-index: (node id, timeout s)
+        self._heard: dict[int, float] = {}  # node id: when its last heartbeat came
+        self._lost: set[int] = set()
+        self.events: collections.deque[DriveEvent] = collections.deque(maxlen=EVENTS_KEPT)
         self.node.add_write_callback(self._on_write)
         self.node.add_read_callback(self._on_read)
         for pdo in self.node.rpdo.map.values():
@@ -139,7 +237,20 @@ class SimulatedDrive:
             self.mode == CSP or (self.mode == PP and self._set_point_acknowledged)
         ):
             word |= SW_BIT12
+        if self.state == QUICK_STOP and self.motion == "hold":
+            word |= SW_TARGET_REACHED
         return word
+
+    @property
+    def moving_speed(self) -> float:
+        """How fast the drive moves its joint now (increments/s): its own speed in a ramp or
+        coasting, the joint's last published speed when driven, 0 when holding."""
+        if self.motion == "driven":
+            return abs(float(self.velocity))
+        return abs(self.speed) if self.motion != "hold" else 0.0
+
+    def _log(self, what: str, value: int | None, statusword: int, speed: float) -> None:
+        self.events.append(DriveEvent(self.clock(), what, value, self.state, statusword, speed))
 
     def boot(self) -> None:
         """Power on: a boot-up message, then NMT pre-operational, as CiA 301 has it."""
@@ -166,7 +277,26 @@ class SimulatedDrive:
         value = od.decode_raw(data)
         with self._lock:
             if index == CONTROLWORD:
+                statusword, speed = self.statusword, self.moving_speed
                 self._on_controlword(value)
+                self._log("controlword", value, statusword, speed)
+            elif index in self._options:
+                self._options[index] = value
+            elif index == QUICK_STOP_DECELERATION:
+                self._quick_stop_deceleration = value
+            elif index == PROFILE_DECELERATION:
+                self._profile_deceleration = value
+            elif index == CONSUMER_HEARTBEAT_TIME and subindex > 0:
+                node_id, ms = (value >> 16) & 0x7F, value & 0xFFFF
+                if ms and node_id:
+                    self._watched[subindex] = (node_id, ms / 1000)
+                    # Watching starts at the first heartbeat heard after this.
+                    self._heard.pop(node_id, None)
+                    self._lost.discard(node_id)
+                    if self._on_watch is not None:
+                        self._on_watch(node_id)
+                else:
+                    self._watched.pop(subindex, None)
             elif index == MODES_OF_OPERATION:
                 if value not in (CSP, PP):
                     raise SdoAbortedError(SDO_ABORT_VALUE_RANGE)
@@ -191,17 +321,7 @@ class SimulatedDrive:
                 self._enter(SOD)
                 self.node.emcy.reset()
             return
-        if not cw & 0x02:  # disable voltage
-            new = SOD if state in (READY, SWITCHED_ON, OPERATION_ENABLED, QUICK_STOP) else state
-        elif not cw & 0x04:  # quick stop
-            new = {OPERATION_ENABLED: QUICK_STOP, READY: SOD, SWITCHED_ON: SOD}.get(state, state)
-        elif not cw & 0x01:  # shutdown
-            new = READY if state in (SOD, SWITCHED_ON, OPERATION_ENABLED) else state
-        elif not cw & 0x08:  # switch on, disable operation
-            new = SWITCHED_ON if state in (READY, OPERATION_ENABLED) else state
-        else:  # (switch on and) enable operation
-            new = OPERATION_ENABLED if state in (READY, SWITCHED_ON, QUICK_STOP) else state
-        self._enter(new)
+        self._enter(self._next_state(cw))
         if self.state == OPERATION_ENABLED and self.mode == PP:
             if cw & CW_NEW_SET_POINT and not previous & CW_NEW_SET_POINT:
                 self.target = self.target_position
@@ -209,19 +329,102 @@ class SimulatedDrive:
             elif not cw & CW_NEW_SET_POINT:
                 self._set_point_acknowledged = False
 
+    def _next_state(self, cw: int) -> str:
+        state = self.state
+        if not cw & 0x02:  # disable voltage
+            return SOD if state in (READY, SWITCHED_ON, OPERATION_ENABLED, QUICK_STOP) else state
+        if not cw & 0x04:  # quick stop
+            return {OPERATION_ENABLED: QUICK_STOP, READY: SOD, SWITCHED_ON: SOD}.get(state, state)
+        if not cw & 0x01:  # shutdown
+            return READY if state in (SOD, SWITCHED_ON, OPERATION_ENABLED) else state
+        if not cw & 0x08:  # switch on, disable operation
+            return SWITCHED_ON if state in (READY, OPERATION_ENABLED) else state
+        # Enable operation; out of QUICK STOP ACTIVE only with the option codes that stay there.
+        if state == QUICK_STOP and not 5 <= self._options[QUICK_STOP_OPTION_CODE] <= 8:
+            return state
+        return OPERATION_ENABLED if state in (READY, SWITCHED_ON, QUICK_STOP) else state
+
     def _enter(self, state: str) -> None:
         if state == self.state:
             return
-        leaving = self.state == OPERATION_ENABLED
+        previous = self.state
         self.state = state
         if state == OPERATION_ENABLED:
             # A drive that is switched on holds where it is until it gets a target.
             self.target = self.position
             self._set_point_acknowledged = False
             self._profile = self._profile_generator()
-        elif leaving:
-            # Braked on the quick stop ramp (or switched off): the joint holds here.
-            self.target = self.position
+            self.motion = "driven"
+            return
+        if previous == OPERATION_ENABLED:
+            option = {
+                QUICK_STOP: QUICK_STOP_OPTION_CODE,
+                READY: SHUTDOWN_OPTION_CODE,
+                SWITCHED_ON: DISABLE_OPERATION_OPTION_CODE,
+                FAULT: FAULT_REACTION_OPTION_CODE,
+            }.get(state)
+            self._react(option)
+        elif previous == QUICK_STOP and state == FAULT and self.motion == "ramp":
+            self._react(FAULT_REACTION_OPTION_CODE)
+        elif state not in POWERED and self.motion != "free":
+            self._power_off()
+
+    def _react(self, option: int | None) -> None:
+        """Leaving "operation enabled": brake as the option code says, or cut the power."""
+        code = self._options[option] if option is not None else 0
+        quick = self._quick_stop_deceleration
+        slow = self._profile_deceleration or quick
+        if option == QUICK_STOP_OPTION_CODE:
+            if code == 0:
+                self.state = SOD
+                self._power_off()
+                return
+            deceleration = slow if code in (1, 5) else quick
+            after = SOD if code <= 4 else None
+        elif option == FAULT_REACTION_OPTION_CODE:
+            if code == 0:
+                self._power_off()
+                return
+            deceleration = slow if code == 1 else quick
+            after = self.state
+        else:  # shutdown, disable operation: 1 slows down first, 0 (or none) does not
+            if code != 1:
+                self._power_off()
+                return
+            deceleration = slow
+            after = self.state
+        self._start_ramp(deceleration, after)
+
+    def _start_ramp(self, deceleration: float, after: str | None) -> None:
+        if self.motion == "driven":
+            self._setpoint, self.speed = float(self.position), float(self.velocity)
+        self._deceleration = abs(deceleration)
+        self._after_ramp = after
+        self.motion = "ramp"
+        if not self._deceleration:
+            self._halt()  # no ramp configured: stop on the spot
+
+    def _halt(self) -> None:
+        self.speed = 0.0
+        statusword = self.statusword
+        if self._after_ramp is None:
+            self.motion = "hold"
+            self._log("halted", None, statusword, 0.0)
+        else:
+            self.motion = "free"
+            self._log("halted", None, statusword, 0.0)
+            self.state = self._after_ramp
+            self._log("power off", None, statusword, 0.0)
+
+    def _power_off(self) -> None:
+        """The power stage goes off: the joint keeps the speed it had and coasts."""
+        statusword, speed = self.statusword, self.moving_speed
+        if self.motion == "driven":
+            self._setpoint, self.speed = float(self.position), float(self.velocity)
+        elif self.motion == "hold":
+            self.speed = 0.0
+        self.motion = "free"
+        self._log("power off", None, statusword, speed)
 
     def _profile_generator(self) -> TargetLimiter | None:
         """pp: the drive's own ramp to each new target, None where it was not given one."""
@@ -244,11 +447,46 @@ class SimulatedDrive:
         if send_emcy:
             self.node.emcy.send(code, register)
 
+    # ------------------------------------------------------------------ consumer heartbeat
+
+    def heard(self, node_id: int) -> None:
+        """A heartbeat of ``node_id`` came (the bus's receive thread)."""
+        with self._lock:
+            self._heard[node_id] = self.clock()
+            self._lost.discard(node_id)
+
+    def supervise(self) -> None:
+        """React to every watched heartbeat older than its time, once per silence."""
+        now = self.clock()
+        lost = []
+        with self._lock:
+            for node_id, timeout in self._watched.values():
+                heard = self._heard.get(node_id)
+                if heard is None or node_id in self._lost or now - heard <= timeout:
+                    continue
+                self._lost.add(node_id)
+                lost.append(node_id)
+                statusword, speed = self.statusword, self.moving_speed
+                action = self._options[ABORT_CONNECTION_OPTION_CODE]
+                if action == 1:
+                    self.error_register |= ERROR_REGISTER_GENERIC
+                    self._enter(FAULT)
+                elif action == 2:
+                    self._enter(self._next_state(CW_DISABLE_VOLTAGE))
+                elif action == 3:
+                    self._enter(self._next_state(CW_QUICK_STOP))
+                self._log("master heartbeat lost", node_id, statusword, speed)
+            register = self.error_register
+        for _ in lost:
+            self.node.emcy.send(EMCY_HEARTBEAT_LOST, register)
+
     # ------------------------------------------------------------------ PDOs
 
     def _on_rpdo(self, pdo: PdoMap) -> None:
         if self.node.nmt.state != "OPERATIONAL":
             return
+        with self._lock:
+            self._log("rpdo", None, self.statusword, self.moving_speed)
         for var in pdo:
             data = bytes(var.get_data())
             if pdo.trans_type is not None and pdo.trans_type <= 240:
@@ -259,6 +497,8 @@ class SimulatedDrive:
 
     def on_sync(self) -> None:
         with self._lock:
+            if self.node.nmt.state == "OPERATIONAL":
+                self._log("sync", None, self.statusword, self.moving_speed)
             pending, self._pending = self._pending, {}
             for (index, subindex), data in pending.items():
                 self.node.set_data(index, subindex, data)
@@ -283,12 +523,31 @@ class SimulatedDrive:
     # ------------------------------------------------------------------ the joint
 
     def command(self) -> float:
-        """Where the joint should go this control step (m or rad)."""
+        """Where the joint should go this control step (m or rad), one step of the drive's
+        motion on from the last."""
         joint = self.joint
-        goal = joint.from_increments(self.target)
-        if self.state == OPERATION_ENABLED and self.mode == PP:
-            return goal if self._profile is None else self._profile.step(goal)
-        return goal
+        if self.motion == "driven":
+            goal = joint.from_increments(self.target)
+            if self.mode == PP and self._profile is not None:
+                return self._profile.step(goal)
+            return goal
+        dt = self._dt
+        if self.motion == "ramp":
+            v = self.speed
+            v_new = math.copysign(max(abs(v) - self._deceleration * dt, 0.0), v)
+            self._setpoint += 0.5 * (v + v_new) * dt
+            self.speed = v_new
+            if v_new == 0.0:
+                self._halt()
+        elif self.motion == "free" and self.speed:
+            self._setpoint += self.speed * dt
+            ends = sorted(joint.to_increments(s * joint.hard_limit) for s in (-1, 1))
+            if not ends[0] < self._setpoint < ends[1]:
+                # An end stop takes the rest of the speed.
+                self._setpoint = min(max(self._setpoint, ends[0]), ends[1])
+                self.speed = 0.0
+        self.target = round(self._setpoint)
+        return joint.from_increments(self._setpoint)
 
 
 class SimulatedDrives:
@@ -301,6 +560,9 @@ class SimulatedDrives:
             then spins); by default the order of ``sim.rods``.
         channel: the virtual channel; by default ``config.bus.channel``, for a config whose
             ``bus.interface`` is ``virtual``.
+        clock: the table's clock (s) the drives supervise the master's heartbeat on and stamp
+            their events with: the wall clock for a table that runs in real time, the simulated
+            time in lock-step.
 
     Joints of the simulation without a drive (an opponent's rods) are held where they were
     when this was made, or wherever :meth:`set_free_targets` sends them.
@@ -316,6 +578,8 @@ class SimulatedDrives:
         sim: TableSim,
         rods_index: Mapping[str, int] | None = None,
         channel: str | int | None = None,
+        *,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if channel is None:
             if config.bus.interface != "virtual":
@@ -331,6 +595,8 @@ class SimulatedDrives:
             raise ValueError(f"rods {missing} have drives but are not in the simulation")
         self.sim = sim
         self.config = config
+        self.clock = clock
+        self._watching: set[int] = set()
         self._n = len(rods_index)
         self._index = {
             (rod, kind): i + (self._n if kind == "spin" else 0)
@@ -350,7 +616,9 @@ class SimulatedDrives:
         try:
             for joint in config.joints:
                 position = positions[self._index[joint.key]]
-                drive = SimulatedDrive(joint, self._lock, position, sim.control_dt)
+                drive = SimulatedDrive(
+                    joint, self._lock, position, sim.control_dt, clock, self._watch
+                )
                 self.network.add_node(drive.node)
                 self.drives[joint.node_id] = drive
             self.network.subscribe(NMT_ID, self._on_nmt)
@@ -377,12 +645,15 @@ class SimulatedDrives:
     # ------------------------------------------------------------------ lockstep
 
     def apply(self) -> None:
-        """Command the rods: each drive's target, or its hold position when not enabled.
+        """Command the rods: one control step of each drive's motion.
 
         Waits first until the nodes have processed every frame sent before this call (a
-        SYNC included), so the master's last targets are the ones applied.
+        SYNC included), so the master's last targets are the ones applied; then each drive
+        checks the heartbeats it watches.
         """
         self._flush()
+        for drive in self.drives.values():
+            drive.supervise()
         with self._lock:
             for drive in self.drives.values():
                 self._targets[self._index[drive.joint.key]] = drive.command()
@@ -433,6 +704,16 @@ class SimulatedDrives:
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         for drive in self.drives.values():
             drive.on_sync()
+
+    def _watch(self, node_id: int) -> None:
+        """Listen for ``node_id``'s heartbeat (a drive was told to watch it)."""
+        if node_id not in self._watching:
+            self._watching.add(node_id)
+            self.network.subscribe(HEARTBEAT_BASE + node_id, self._on_heartbeat)
+
+    def _on_heartbeat(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        for drive in self.drives.values():
+            drive.heard(can_id - HEARTBEAT_BASE)
 
     def _on_flush(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if data[0] == self._flush_seq:
