@@ -120,12 +120,21 @@ def _urdf_with_rods(rod_names: tuple[str, ...]) -> str:
     # Named by content, so processes share one file and a changed table gets a new one.
     digest = hashlib.sha1(text.encode()).hexdigest()[:16]
     path = Path(tempfile.gettempdir()) / f"foosball_gym_{digest}.urdf"
-    if not path.exists():
+    # Anyone can write to the temp folder: a file under this name is used only if it holds
+    # exactly this table.
+    if not _holds(path, text):
         fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".urdf")
         with os.fdopen(fd, "w") as f:
             f.write(text)
         os.replace(tmp, path)
     return str(path)
+
+
+def _holds(path: Path, text: str) -> bool:
+    try:
+        return path.read_text() == text
+    except (OSError, UnicodeDecodeError):
+        return False
 
 
 def _merge_fixed_links(robot: ET.Element) -> None:

@@ -187,3 +187,21 @@ def test_wheel_ships_the_urdf_and_the_cli_and_an_installed_copy_runs(tmp_path):
     )
     assert out.returncode == 0, out.stderr
     assert "ok" in out.stdout
+
+
+def test_a_file_planted_under_the_cached_urdf_name_is_not_trusted():
+    """The rod-subset URDF is cached in the shared temp folder; another user's file there
+    under the same name must not become the table."""
+    from pathlib import Path
+
+    from foosball_gym.simulator import TableSim, _urdf_with_rods
+
+    rods = ("home_keeper",)
+    _urdf_with_rods.cache_clear()
+    path = Path(_urdf_with_rods(rods))
+    genuine = path.read_text()
+    path.write_text(genuine.replace("home_keeper_slide", "planted_slide"))
+    _urdf_with_rods.cache_clear()
+    assert Path(_urdf_with_rods(rods)).read_text() == genuine
+    sim = TableSim(rods)
+    sim.close()
