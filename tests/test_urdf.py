@@ -189,13 +189,16 @@ def test_wheel_ships_the_urdf_and_the_cli_and_an_installed_copy_runs(tmp_path):
     assert "ok" in out.stdout
 
 
-def test_a_file_planted_under_the_cached_urdf_name_is_not_trusted():
+def test_a_file_planted_under_the_cached_urdf_name_is_not_trusted(tmp_path, monkeypatch):
     """The rod-subset URDF is cached in the shared temp folder; another user's file there
     under the same name must not become the table."""
+    import tempfile
     from pathlib import Path
 
     from foosball_gym.simulator import TableSim, _urdf_with_rods
 
+    # A temp folder of this test's own: the shared one's file is in use by other processes.
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     rods = ("home_keeper",)
     _urdf_with_rods.cache_clear()
     path = Path(_urdf_with_rods(rods))
@@ -203,5 +206,7 @@ def test_a_file_planted_under_the_cached_urdf_name_is_not_trusted():
     path.write_text(genuine.replace("home_keeper_slide", "planted_slide"))
     _urdf_with_rods.cache_clear()
     assert Path(_urdf_with_rods(rods)).read_text() == genuine
+    assert path.parent == tmp_path
     sim = TableSim(rods)
     sim.close()
+    _urdf_with_rods.cache_clear()
