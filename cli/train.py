@@ -22,8 +22,10 @@ from foosball_gym.cli.common import (
     positive_number,
     seed,
 )
+from foosball_gym.cli.distributed import add_rllib_arguments, run_from_args
 from foosball_gym.training.config import ALGORITHMS, LR_SCHEDULES, VEC_ENV_KINDS, TrainConfig
 from foosball_gym.training.files import CONFIG_FILE, has_checkpoint
+from foosball_gym.training.rllib_backend import BACKEND, read_backend
 
 # The TrainConfig fields offered as options (n_envs as --n-envs), with how the command line
 # spells their values.
@@ -106,6 +108,7 @@ def add_parser(subparsers: Any) -> None:
         help=fields_by_name["normalize_reward"].metadata["help"],
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_rllib_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -128,6 +131,9 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.backend == BACKEND or (args.resume and read_backend(args.resume) == BACKEND):
+        config = None if args.resume or not args.env_id else config_from_args(args)
+        return run_from_args(args, config)
     from foosball_gym.training import require_train_extra
 
     require_train_extra()

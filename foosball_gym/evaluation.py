@@ -16,7 +16,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-import foosball_gym  # noqa: F401  (registers the ids)
 from foosball_gym.catalog import check_env_id
 
 Policy = Callable[[np.ndarray], Any]

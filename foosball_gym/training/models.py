@@ -118,6 +118,17 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     else:
         path = Path(text)
     if path.is_dir():
+        # Imported here: the RLlib backend's module imports this one's neighbours.
+        from foosball_gym.training.rllib_backend import is_rllib_run, load_rllib_policy
+
+        if is_rllib_run(path):
+            try:
+                rllib = load_rllib_policy(path)
+            except ValueError as err:
+                raise ModelLoadError(str(err)) from None
+            return LoadedPolicy(
+                policy=rllib, env_id=rllib.env_id, env_kwargs=rllib.env_kwargs, source=str(path)
+            )
         run_dir, zip_path = path, path / MODEL_FILE
         if not zip_path.exists():
             raise ModelLoadError(f"{path} is a directory without {MODEL_FILE}: not a run")

@@ -26,7 +26,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
-import foosball_gym  # noqa: F401  (registers the ids)
+import foosball_gym.registration  # noqa: F401  (the package registers the ids)
 from foosball_gym.evaluation import evaluate
 from foosball_gym.table import PHYSICS_REVISION
 from foosball_gym.training.config import (
@@ -62,7 +62,7 @@ def _ignoring_sigint(env_fn: Callable[[], Any]) -> Callable[[], Any]:
         # steps.
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         # This function reaches the worker by value, so nothing has registered the ids there.
-        import foosball_gym  # noqa: F401, F811
+        import foosball_gym.registration  # noqa: F401, F811
 
         return env_fn()
 
