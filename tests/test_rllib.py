@@ -206,3 +206,16 @@ def test_training_joins_a_ray_head_started_apart_by_its_address(tmp_path):
         current = Path("/tmp/ray/ray_current_cluster")
         if current.exists() and current.read_text().strip().endswith(f":{port}"):
             current.unlink()
+
+
+def test_an_unreachable_address_fails_fast_naming_it(tmp_path, capsys):
+    port = _free_port()  # nothing listens there
+    started = time.monotonic()
+    with pytest.raises(SystemExit) as exit_info:
+        main(
+            ["train", ENV, "--backend", "rllib", "--address", f"127.0.0.1:{port}"]
+            + ["--out", str(tmp_path / "run"), "--timesteps", "1000", "--no-progress"]
+        )
+    assert exit_info.value.code == 2
+    assert f"127.0.0.1:{port}" in capsys.readouterr().err
+    assert time.monotonic() - started < 30

@@ -546,6 +546,28 @@ def _build_config(
     )
 
 
+# Ray itself retries an unreachable head for many minutes before it gives up.
+CONNECT_TIMEOUT_S = 10.0
+
+
+def _check_reachable(address: str) -> None:
+    """Raise ConnectionError where ``HOST:PORT`` takes no connection within the timeout."""
+    import socket
+
+    if address == "auto" or address.startswith("ray://"):
+        return
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit():
+        raise ValueError(f"--address must be HOST:PORT or auto, got {address!r}")
+    try:
+        with socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S):
+            pass
+    except OSError as err:
+        raise ConnectionError(
+            f"no Ray head answers at {address} within {CONNECT_TIMEOUT_S:.0f} s ({err})"
+        ) from None
+
+
 def _start_ray(address: str | None, num_workers: int) -> bool:
     """Connect to (or start) Ray; True where this call started it and must shut it down."""
     import ray
@@ -553,6 +575,7 @@ def _start_ray(address: str | None, num_workers: int) -> bool:
     if ray.is_initialized():
         return False
     if address:
+        _check_reachable(address)
         ray.init(address=address, include_dashboard=False, log_to_driver=False)
     else:
         # One CPU per env runner, on top of the driver (which runs the learner).
