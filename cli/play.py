@@ -10,16 +10,34 @@ from foosball_gym.cli.common import (
     CliError,
     LibraryDefault,
     add_env_arguments,
+    check_model_fits,
     given,
     load_model,
     parse_env_kwargs,
     positive_int,
+    positive_number,
     scripted,
+    seconds,
+    seed,
     show_size,
     size,
 )
 
 PLAY_SIM = "foosball_gym.play.stack:play_sim"
+
+
+class _CameraDefault(LibraryDefault):
+    """The simulated camera's size, which depends on the clock the table keeps."""
+
+    def __init__(self) -> None:
+        super().__init__(PLAY_SIM, "camera_size")
+
+    def __str__(self) -> str:
+        try:
+            from foosball_gym.play.stack import LOCKSTEP_CAMERA, REALTIME_CAMERA
+        except ImportError:
+            return "play_sim's default"
+        return f"{show_size(LOCKSTEP_CAMERA)}; {show_size(REALTIME_CAMERA)} with --realtime"
 
 
 def add_parser(subparsers: Any) -> None:
@@ -45,17 +63,19 @@ def add_parser(subparsers: Any) -> None:
         help="served balls on the simulated table (%(default)s)",
     )
     p.add_argument(
-        "--duration", type=float, help="seconds to play on a real table (default: until Ctrl-C)"
+        "--duration",
+        type=positive_number,
+        help="seconds to play on a real table (default: until Ctrl-C)",
     )
     p.add_argument(
         "--latency",
-        type=float,
+        type=seconds,
         help="how far ahead the filter predicts, s "
         "(default: the table's estimation.latency_s, else 0.03)",
     )
     p.add_argument(
         "--seed",
-        type=int,
+        type=seed,
         default=LibraryDefault(PLAY_SIM, "seed"),
         help="seed of the simulated table's serves",
     )
@@ -63,9 +83,15 @@ def add_parser(subparsers: Any) -> None:
         "--camera",
         dest="camera_size",
         type=size,
-        default=LibraryDefault(PLAY_SIM, "camera_size", show_size),
+        default=_CameraDefault(),
         metavar="WxH",
         help="the simulated camera's resolution (%(default)s)",
+    )
+    p.add_argument(
+        "--realtime",
+        action="store_true",
+        help="run the simulated table on the wall clock, its camera in a process of its own, "
+        "instead of in lock-step with the loop on simulated time (deterministic)",
     )
     p.add_argument("--log", metavar="FILE.jsonl", help="log every loop to this file")
     p.add_argument("--no-status", action="store_true", help="no live status line")
@@ -79,11 +105,13 @@ def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
         if not args.env:
             raise CliError("the scripted policy needs --env ENV_ID")
         return scripted(args.env, env_kwargs), args.env, env_kwargs
-    loaded = load_model(args.model)
+    loaded = load_model(args.model, args.trust_model)
     env_id = args.env or loaded.env_id
     if env_id is None:
         raise CliError(f"{args.model} does not say its environment; give --env ENV_ID")
-    return loaded.policy, env_id, {**loaded.env_kwargs, **env_kwargs}
+    env_kwargs = {**loaded.env_kwargs, **env_kwargs}
+    check_model_fits(loaded, env_id, env_kwargs)
+    return loaded.policy, env_id, env_kwargs
 
 
 def run(args: argparse.Namespace) -> int:
@@ -108,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
                 log_path=args.log,
                 latency_s=args.latency,
                 status=not args.no_status,
+                realtime=args.realtime,
                 **given(args, "seed", "camera_size"),
             )
         else:
@@ -138,5 +167,6 @@ def run(args: argparse.Namespace) -> int:
             f"ball detection error: mean {sum(errors) / len(errors):.1f} mm, "
             f"max {max(errors):.1f} mm"
         )
+    print(report.timing_summary())
     print(report.timing_table())
     return 0

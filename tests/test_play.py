@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import cv2
 import numpy as np
@@ -63,6 +64,26 @@ def test_cli_plays_on_the_simulated_table(capsys):
     )
     out = capsys.readouterr().out
     assert "3 episodes of Foosball-Block-v0" in out and "stage" in out
+    assert "late 0 of" in out  # lock-step: the table waits for the loop
+
+
+# The whole stack on the wall clock: a stall of the shared machine can trip the 50 ms
+# watchdog (seen about once in five 30-serve sessions), so it is not in the default run.
+@pytest.mark.slow
+def test_the_stack_plays_on_the_table_in_real_time():
+    report = play_sim(
+        block_keeper(),
+        "Foosball-Block-v0",
+        {},
+        episodes=3,
+        seed=3,
+        camera_size=SMALL_CAMERA,
+        realtime=True,
+    )
+    assert report.episodes == 3 and report.steps > 0
+    assert np.median(report.ball_error_mm) < 3.0
+    # Periods are what the wall clock gave: measured, not asserted (benchmarks and README).
+    assert len(report.period_ms) == report.steps - 1
 
 
 def test_a_two_player_task_plays_with_the_opponent_seen_by_the_camera():
@@ -150,3 +171,50 @@ def test_the_shipped_table_configuration_loads():
         ("home_keeper", "spin", 2),
     ]
     json.dumps(config.to_dict())
+
+
+def realtime_block_table():
+    interface = task_interface("Foosball-Block-v0")
+    config = sim_table_config(interface)
+    table = SimulatedTable("Foosball-Block-v0", {}, config, camera_size=SMALL_CAMERA, realtime=True)
+    return table, config
+
+
+def test_the_real_time_table_moves_on_while_the_loop_hangs_and_counts_it_late():
+    table, _ = realtime_block_table()
+    try:
+        table.step()  # starts its clock
+        steps, late, ball = table.steps, table.late_steps, table.ball()
+        time.sleep(6 * table.sim.control_dt)  # a loop that hangs
+        assert table.steps > steps and table.late_steps > late
+        assert table.ball()[:2] != ball[:2]  # the shot went on
+        late = table.late_steps
+        for _ in range(3):
+            table.step()  # a loop that keeps up
+        assert table.time == pytest.approx(table.steps * table.sim.control_dt)
+    finally:
+        table.close()
+
+
+def test_real_time_frames_show_the_ball_where_it_was_when_they_were_taken():
+    table, config = realtime_block_table()
+    try:
+        calibration = CameraCalibration.from_camera_model(table.camera_model)
+        config.camera["calibration"] = calibration.to_dict()
+        detector = build_perception(config, task_interface("Foosball-Block-v0"), 0.0)[0]
+        times = []
+        for episode in range(2):
+            if episode:
+                table.serve()
+            for _ in range(6):
+                table.step()
+                t, frame = table.read()
+                times.append(t)
+                found = detector.detect(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+                assert found is not None
+                x, y = calibration.pixel_to_table(np.array([found.u, found.v]))
+                true_x, true_y, _, _ = table.ball(at=t)
+                assert np.hypot(x - true_x, y - true_y) < 0.01, (episode, t)
+        assert times == sorted(times)
+    finally:
+        table.close()

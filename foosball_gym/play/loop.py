@@ -34,6 +34,8 @@ class LoopRecord:
     action: list[float]
     targets: dict[str, float]
     stage_ms: dict[str, float] = field(default_factory=dict)
+    #: The loop overran its period: its command reached the table a control step late.
+    late: bool = False
 
     @property
     def loop_ms(self) -> float:
@@ -57,7 +59,9 @@ class PlayLoop:
         estimator: the Kalman filters (``update``, ``observation``).
         rod_tracker: ``frame -> {rod: slide | None}`` for the opponent's rods (None when the
             task has no opponent).
-        clock: seconds, monotonic; the simulated table passes its simulated time.
+        clock: seconds, monotonic; the simulated table passes its simulated time. The
+            drives' command guard measures on it too (``drives.use_clock``), so a lock-step
+            table, which waits for the loop, is not stopped for a slow loop.
         on_record: called with every :class:`LoopRecord` (session log, status line).
     """
 
@@ -84,6 +88,9 @@ class PlayLoop:
         self.rod_tracker = rod_tracker
         self.clock = clock
         self.on_record = on_record
+        use_clock = getattr(drives, "use_clock", None)
+        if use_clock is not None:
+            use_clock(clock)
         rods = interface.builder.rods_in_play
         self._n = len(rods)
         self._slot = {(rod, "slide"): i for i, rod in enumerate(rods)}
@@ -174,8 +181,10 @@ class StatusLine:
         self._count = 0
         self._last_t: float | None = None
         self._rate = 0.0
+        self._late = 0
 
     def __call__(self, record: LoopRecord) -> None:
+        self._late += record.late
         if self._last_t is not None and record.t > self._last_t:
             self._rate = 0.9 * self._rate + 0.1 / (record.t - self._last_t)
         self._last_t = record.t
@@ -185,6 +194,7 @@ class StatusLine:
         ball = record.ball_measured
         seen = f"ball ({ball[0]:+.3f}, {ball[1]:+.3f}) m" if ball else "ball not seen"
         self.write(
-            f"\r{self._rate:5.1f} Hz | loop {record.loop_ms:5.1f} ms | {seen} | "
+            f"\r{self._rate:5.1f} Hz | loop {record.loop_ms:5.1f} ms | late {self._late} | "
+            f"{seen} | "
             f"action {' '.join(f'{a:+.2f}' for a in record.action)} | faults: none   "
         )

@@ -3,13 +3,24 @@
 ``foosball play MODEL --table sim`` runs the complete real-table stack against it: the camera
 renders the PyBullet scene, the drives are CiA 402 nodes on python-can's virtual bus, and the
 away side (if the task has one) is played by the task's opponent, as a human would play it.
-Time is simulated: one :meth:`SimulatedTable.step` is one control step, in lockstep with the loop.
+Two ways to keep time:
+
+- **lock-step** (``realtime=False``): time is simulated; one :meth:`SimulatedTable.step` is
+  one control step, taken when the loop asks. Deterministic, for tests.
+- **real time** (``realtime=True``): a thread steps the table at the control rate of the wall
+  clock, whatever the loop is doing, as a real table moves; the camera renders in a process of
+  its own (:mod:`~foosball_gym.sim_table.camera_process`). :meth:`SimulatedTable.step` then
+  waits for the next control step, and a loop that comes after its step has passed is late:
+  its command acts one step later. Late steps are counted.
 """
 
 from __future__ import annotations
 
+import collections
 import itertools
 import os
+import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -20,6 +31,7 @@ from foosball_gym.game import Game
 from foosball_gym.hardware.config import BusConfig, JointConfig, TableConfig
 from foosball_gym.interface.task import TaskInterface
 from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
+from foosball_gym.sim_table.camera_process import CameraProcess
 from foosball_gym.sim_table.drives import SimulatedDrives
 from foosball_gym.simulator import TableSim
 from foosball_gym.tasks import interface_of, make_task
@@ -73,6 +85,7 @@ class SimulatedTable:
             bus must be a ``virtual`` one.
         seed: seeds the serves (and the opponent's randomness, if any).
         camera_size: (width, height) of the rendered camera frames.
+        realtime: keep the wall clock's time (see the module's docstring) instead of lock-step.
     """
 
     def __init__(
@@ -82,20 +95,146 @@ class SimulatedTable:
         config: TableConfig,
         seed: int = 0,
         camera_size: tuple[int, int] = (640, 360),
+        realtime: bool = False,
     ) -> None:
         task, options = make_task(env_id, env_kwargs)
         physics = check_physics(*(options.get(k, d) for k, d in PHYSICS_DEFAULTS.items()))
         self.sim = TableSim(task.layout.rods, **dict(zip(PHYSICS_DEFAULTS, physics)))
+        self.realtime = bool(realtime)
+        self._t0 = time.monotonic()
+        self.time = 0.0
+        self.steps = 0
+        self.late_steps = 0
+        self._camera: CameraProcess | None = None
+        self._thread: threading.Thread | None = None
         try:
             self.game = Game(task, interface_of(task, options), self.sim)
             self.rng = np.random.default_rng(seed)
             self.game.start(task.sample_start(self.rng))
             self.camera_model = CameraModel(*camera_size)
-            self.drives = SimulatedDrives(config, self.sim)
+            # The drives watch the master's heartbeat on the table's own clock.
+            self.drives = SimulatedDrives(config, self.sim, clock=self.clock)
+            if self.realtime:
+                self._camera = CameraProcess(task.layout.rods, *camera_size)
         except BaseException:
-            self.sim.close()
+            self.close()
             raise
-        self.time = 0.0
+        self._lock = threading.RLock()
+        self._ticked = threading.Condition(self._lock)
+        self._events: list[tuple[int, bool]] = []
+        self._waiting = False
+        self._stop = threading.Event()
+        # The true ball of the last few steps, for comparing delayed frames' estimates with.
+        self._balls: collections.deque[tuple[float, tuple[float, float, float, float]]] = (
+            collections.deque(maxlen=16)
+        )
+        self._balls.append((0.0, self.game.ball))
+        self._serves = 0
+        self._served_at = 0.0
+        self._t0 = time.monotonic()
+        if self._camera is not None:
+            self._camera.request((0, 0.0), *self.sim.scene())
+
+    # ------------------------------------------------------------------ time
+
+    def clock(self) -> float:
+        """The table's time (s): simulated in lock-step, the wall clock's in real time."""
+        if self.realtime:
+            return time.monotonic() - self._t0
+        return self.time
+
+    def start(self) -> None:
+        """Start the table's own clock (real time only; lock-step waits for :meth:`step`)."""
+        if not self.realtime or self._thread is not None:
+            return
+        self._t0 = time.monotonic() - self.time
+        self._thread = threading.Thread(target=self._run, name="simulated-table", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        dt = self.sim.control_dt
+        next_tick = self._t0 + self.time + dt
+        while not self._stop.is_set():
+            wait = next_tick - time.monotonic()
+            if wait > 0 and self._stop.wait(wait):
+                break
+            with self._lock:
+                if not self._waiting:
+                    self.late_steps += 1
+                self._events.append(self._tick())
+                self._waiting = False
+                self._ticked.notify_all()
+                stamp, scene = (self._serves, self.time), self.sim.scene()
+            assert self._camera is not None
+            self._camera.request(stamp, *scene)
+            next_tick += dt
+            # After a stall (a debugger, a suspended process) time is not made up in a burst.
+            if time.monotonic() > next_tick + dt:
+                next_tick = time.monotonic() + dt
+
+    def _tick(self) -> tuple[int, bool]:
+        if self.game.task.layout.opponent:
+            self.drives.set_free_targets(self.game.opponent_targets())
+        self.drives.apply()
+        outcome = self.game.advance()
+        self.time += self.sim.control_dt
+        self.steps += 1
+        self._balls.append((self.time, self.game.ball))
+        self.drives.publish()
+        return outcome.goal, outcome.out_of_table
+
+    # ------------------------------------------------------------------ the loop's side
+
+    def frame(self) -> np.ndarray:
+        """The camera's view of the table now, RGB (lock-step)."""
+        return self.sim.render(self.camera_model.width, self.camera_model.height)
+
+    def read(self) -> tuple[float, np.ndarray]:
+        """The newest camera frame and the table time it shows, RGB: the one just rendered in
+        lock-step, the newest the camera process has finished in real time."""
+        if self._camera is None:
+            return self.time, self.frame()
+        # A frame from before the serve shows a ball that is no longer there.
+        (_, t), frame = self._camera.latest(after=(self._serves, self._served_at))
+        return t, frame
+
+    def serve(self) -> None:
+        """A new ball, as the task starts its episodes; the rods stay where they are."""
+        with self._lock:
+            self.game.serve(self.rng)
+            self._serves += 1
+            self._served_at = self.time
+            self._balls.append((self.time, self.game.ball))
+            if self._camera is not None:
+                # Queued: the loop waits for a picture of the new ball.
+                self._camera.request((self._serves, self.time), *self.sim.scene(), queue=True)
+
+    def step(self) -> tuple[int, bool]:
+        """One control step: the drives take their targets, the opponent moves, physics runs.
+
+        In real time, waits for the table's next step instead and reports what happened since
+        the last call.
+
+        Returns:
+            ``(goal, out_of_table)``: goal +1 (home scored), -1 (away scored) or 0.
+        """
+        if not self.realtime:
+            return self._tick()
+        if self._thread is None:
+            self.start()
+        with self._lock:
+            self._waiting = True
+            steps = self.steps
+            if not self._ticked.wait_for(lambda: self.steps > steps, timeout=1.0):
+                raise RuntimeError("the simulated table's clock stopped")
+            events, self._events = self._events, []
+        goal = next((g for g, _ in events if g), 0)
+        return goal, any(out for _, out in events)
+
+    @property
+    def success(self) -> bool:
+        """Whether the task is met by the goals since the last serve."""
+        return self.game.success
 
     @property
     def goals_for(self) -> int:
@@ -105,37 +244,22 @@ class SimulatedTable:
     def goals_against(self) -> int:
         return self.game.goals_against
 
-    def frame(self) -> np.ndarray:
-        """The camera's view of the table now, RGB."""
-        return self.sim.render(self.camera_model.width, self.camera_model.height)
-
-    def serve(self) -> None:
-        """A new ball, as the task starts its episodes; the rods stay where they are."""
-        self.game.serve(self.rng)
-
-    def step(self) -> tuple[int, bool]:
-        """One control step: the drives take their targets, the opponent moves, physics runs.
-
-        Returns:
-            ``(goal, out_of_table)``: goal +1 (home scored), -1 (away scored) or 0.
-        """
-        if self.game.task.layout.opponent:
-            self.drives.set_free_targets(self.game.opponent_targets())
-        self.drives.apply()
-        outcome = self.game.advance()
-        self.time += self.sim.control_dt
-        self.drives.publish()
-        return outcome.goal, outcome.out_of_table
-
-    @property
-    def success(self) -> bool:
-        """Whether the task is met by the goals since the last serve."""
-        return self.game.success
-
-    def ball(self) -> tuple[float, float, float, float]:
-        """The true ball x, y, vx, vy (for comparing the estimate with)."""
-        return self.game.ball
+    def ball(self, at: float | None = None) -> tuple[float, float, float, float]:
+        """The true ball x, y, vx, vy now, or at the table time ``at`` of a recent step."""
+        if at is None:
+            return self.game.ball
+        # Newest first: a serve leaves two entries at one time, and the new ball is the truth.
+        return min(reversed(self._balls), key=lambda tb: abs(tb[0] - at))[1]
 
     def close(self) -> None:
-        self.drives.close()
+        """Stop the clock, the camera and the drives; safe to call twice."""
+        stop = getattr(self, "_stop", None)
+        if stop is not None:
+            stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2)
+        if self._camera is not None:
+            self._camera.close()
+        if hasattr(self, "drives"):
+            self.drives.close()
         self.sim.close()
