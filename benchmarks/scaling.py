@@ -23,7 +23,8 @@ ENV = "Foosball-KeeperVsKeeper-v0"
 
 def steps_per_second(workers: int, steps: int, envs_per_runner: int, repeats: int) -> float:
     # The same work per runner at every count: more runners, more envs in all.
-    config = TrainConfig(ENV, n_envs=envs_per_runner * workers, net_arch=(256, 128, 64))
+    n_envs = envs_per_runner * workers
+    config = TrainConfig(ENV, n_envs=n_envs, net_arch=(256, 128, 64), batch_size=128 * n_envs)
     config.check()
     ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
     try:
