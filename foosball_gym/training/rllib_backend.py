@@ -42,13 +42,10 @@ import json
 import math
 import random
 import shutil
-import signal
-import threading
 import time
 import warnings
 from collections import deque
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -68,6 +65,7 @@ from foosball_gym.training.files import (
     atomic_write_text,
     has_checkpoint,
 )
+from foosball_gym.training.signals import SignalStop
 
 BACKEND = "rllib"
 POLICY_FILE = "policy.pt"
@@ -434,30 +432,6 @@ class RllibTrainResult:
     signal: int | None = None
     generation: int = 0
     games: int = 0
-
-
-class _Stop:
-    """Ends training after the current iteration once SIGINT or SIGTERM arrived."""
-
-    def __init__(self) -> None:
-        self.signum: int | None = None
-
-    def _handle(self, signum: int, frame: Any) -> None:
-        if self.signum is not None:
-            raise KeyboardInterrupt
-        self.signum = signum
-
-    @contextmanager
-    def installed(self) -> Iterator[None]:
-        if threading.current_thread() is not threading.main_thread():
-            yield
-            return
-        previous = {s: signal.signal(s, self._handle) for s in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            yield
-        finally:
-            for s, handler in previous.items():
-                signal.signal(s, handler)
 
 
 def check_rllib_config(config: TrainConfig, num_workers: int) -> None:
@@ -872,7 +846,7 @@ def train_rllib(
             _set_modules(algo, {opponent_id(0): state})
             _save_config(config, num_workers, out / CONFIG_FILE)
 
-        stop = _Stop()
+        stop = SignalStop()
         steps = done_steps
         start = time.perf_counter()
         next_eval = (steps // config.eval_freq + 1) * config.eval_freq

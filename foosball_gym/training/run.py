@@ -10,11 +10,9 @@ import csv
 import json
 import shutil
 import signal
-import threading
 import time
 import warnings
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,6 +47,7 @@ from foosball_gym.training.files import (
 )
 from foosball_gym.training.pretrain import clone, collect
 from foosball_gym.training.selfplay import OpponentActionWrapper, SelfPlayCallback, SelfPlayVecEnv
+from foosball_gym.training.signals import SignalStop
 from foosball_gym.training.snapshot import PolicySnapshot
 from foosball_gym.training.storage import NormStats, read_model_zip, read_norm, strip_pickles
 
@@ -277,39 +276,11 @@ class CheckpointCallback(BaseCallback):
         atomic_write_text(self.dir / LATEST_FILE, json.dumps(pointer))
 
 
-class StopOnSignal(BaseCallback):
-    """Ends training at the next step once SIGINT or SIGTERM arrived (see :meth:`installed`).
-
-    Stopping between steps, not where the signal lands, leaves no update half done, so the
-    checkpoint written afterwards holds a consistent model. A second signal stops at once.
-    """
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.signum: int | None = None
+class StopOnSignal(SignalStop, BaseCallback):
+    """SB3's face of :class:`SignalStop`: ends ``learn`` at the next step after a signal."""
 
     def _on_step(self) -> bool:
         return self.signum is None
-
-    def _handle(self, signum: int, frame: Any) -> None:
-        if self.signum is not None:
-            raise KeyboardInterrupt
-        self.signum = signum
-
-    @contextmanager
-    def installed(self) -> Iterator[None]:
-        """Catch SIGINT and SIGTERM meanwhile (only the main thread may; elsewhere: nothing)."""
-        if threading.current_thread() is not threading.main_thread():
-            yield
-            return
-        previous = {
-            sig: signal.signal(sig, self._handle) for sig in (signal.SIGINT, signal.SIGTERM)
-        }
-        try:
-            yield
-        finally:
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
 
 
 def save_model(model: Any, path: Path, norm_path: Path) -> None:
