@@ -26,6 +26,7 @@ from foosball_gym.cli.distributed import add_rllib_arguments, run_from_args
 from foosball_gym.training.config import ALGORITHMS, LR_SCHEDULES, VEC_ENV_KINDS, TrainConfig
 from foosball_gym.training.files import CONFIG_FILE, has_checkpoint
 from foosball_gym.training.rllib_backend import BACKEND, read_backend
+from foosball_gym.training.selfplay_rule import SELFPLAY_RULES
 
 # The TrainConfig fields offered as options (n_envs as --n-envs), with how the command line
 # spells their values.
@@ -45,6 +46,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "eval_freq": {"type": positive_int},
     "eval_episodes": {"type": positive_int},
     "checkpoint_freq": {"type": positive_int},
+    "selfplay_rule": {"choices": SELFPLAY_RULES},
     "selfplay_window": {"type": positive_int},
     "selfplay_threshold": {"type": float},
     "selfplay_pool": {"type": positive_int},

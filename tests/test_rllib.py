@@ -48,7 +48,11 @@ def tiny_config(**overrides) -> TrainConfig:
         eval_episodes=2,
         checkpoint_freq=1000,
         # Every 4 games the opponent is replaced, so a short run replaces it several times.
+        # Games end a still ball as a draw (self-play's default plays on to 1800 steps), so
+        # that enough of them finish.
+        env_kwargs={"stagnation_steps": 20},
         selfplay_window=4,
+        selfplay_rule="net_score",
         selfplay_threshold=-1.0,
         selfplay_pool=2,
     )
@@ -107,17 +111,25 @@ def test_policy_file_that_disagrees_with_its_description_is_refused(tmp_path):
         load_rllib_policy(tmp_path / "missing")
 
 
-def test_opponent_is_replaced_once_the_net_score_over_the_window_exceeds_the_threshold(
-    tmp_path,
-):
-    sp = _SelfPlay(TrainConfig(ENV, selfplay_window=4, selfplay_threshold=0.2), tmp_path)
+def test_opponent_is_replaced_by_the_rule_both_backends_share(tmp_path):
+    def pool(rule):
+        config = TrainConfig(ENV, selfplay_window=4, selfplay_rule=rule, selfplay_threshold=0.2)
+        return _SelfPlay(config, tmp_path)
+
+    sp = pool("net_score")
     assert sp.judge([1, 1, 1]) is None  # not a full window yet
-    sp = _SelfPlay(TrainConfig(ENV, selfplay_window=4, selfplay_threshold=0.2), tmp_path)
+    sp = pool("net_score")
     assert sp.judge([1, -1, 0, 0]) is None  # net score 0
     assert sp.judge([1]) is None  # the last four: -1, 0, 0, 1
-    assert sp.judge([1, 1, 1]) == pytest.approx(0.5)  # 0, 0, 1, 1
+    score, elo = sp.judge([1, 1, 1])  # 0, 0, 1, 1
+    assert score == pytest.approx(0.5) and elo > 0
     # The game after the one that earned the snapshot was played against the old pool.
-    assert sp.games == 6 and len(sp.results) == 0
+    assert sp.games == 6 and len(sp.rule.results) == 0
+    # The paper's rule, the default: one win in four is enough, draws or not.
+    sp = pool("win_rate")
+    score, _ = sp.judge([0, 0, 1, 0])
+    assert score == pytest.approx(0.25)
+    assert TrainConfig(ENV).selfplay_rule == "win_rate"
 
 
 def test_rllib_options_parse():

@@ -29,8 +29,8 @@ class RecordingSelfPlay(SelfPlayCallback):
         super().__init__(**kwargs)
         self.learner_at_replacement = []
 
-    def _add_snapshot(self, net_score):
-        super()._add_snapshot(net_score)
+    def _add_snapshot(self, score, elo):
+        super()._add_snapshot(score, elo)
         self.learner_at_replacement.append(
             {k: v.clone() for k, v in self.model.policy.state_dict().items()}
         )
@@ -63,7 +63,7 @@ def selfplay_model(vec_cls, n_envs=2, normalize=True):
 def test_opponent_is_replaced_by_a_snapshot_of_the_learner(tmp_path):
     model = selfplay_model(DummyVecEnv)
     initial = {k: v.clone() for k, v in model.policy.state_dict().items()}
-    callback = RecordingSelfPlay(window=4, threshold=-1.0, save_dir=tmp_path)
+    callback = RecordingSelfPlay(window=4, rule="net_score", threshold=-1.0, save_dir=tmp_path)
     model.learn(3000, callback=callback)
     assert callback.generation >= 1
     latest = callback.pool[-1]
@@ -96,7 +96,7 @@ def test_no_replacement_while_the_learner_is_not_ahead():
 
 def test_self_play_runs_with_subprocess_envs():
     model = selfplay_model(SubprocVecEnv)
-    callback = SelfPlayCallback(window=2, threshold=-1.0)
+    callback = SelfPlayCallback(window=2, rule="net_score", threshold=-1.0)
     try:
         model.learn(1500, callback=callback)
     finally:

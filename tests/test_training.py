@@ -303,7 +303,7 @@ def test_a_start_that_fails_leaves_no_run_behind(tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main([*argv, "--selfplay-threshold", "1.5"])
     assert exit_info.value.code == 2
-    assert "selfplay_threshold must lie in [-1, 1)" in capsys.readouterr().err
+    assert "the win_rate rule's threshold must lie in (0, 1], got 1.5" in capsys.readouterr().err
     assert not (run / "config.json").exists()
 
 

@@ -20,6 +20,7 @@ from foosball_gym.catalog import check_env_id
 from foosball_gym.registration import __version__
 from foosball_gym.table import PHYSICS_REVISION
 from foosball_gym.training.files import atomic_write_text
+from foosball_gym.training.selfplay_rule import check_rule
 
 ALGORITHMS = ("ppo", "sac")
 VEC_ENV_KINDS = ("dummy", "subproc")
@@ -121,8 +122,14 @@ class TrainConfig:
     pretrain_episodes: int = _field(
         0, "episodes of the scripted baseline to behaviour-clone before learning"
     )
-    selfplay_window: int = _field(100, "games the net score is taken over")
-    selfplay_threshold: float = _field(0.2, "net score above which the opponent is replaced")
+    selfplay_rule: str = _field(
+        "win_rate",
+        "when self-play replaces its opponent: win_rate (the paper's: the learner wins at "
+        "least the threshold of the window's games) or net_score ((wins - losses) / games "
+        "above it)",
+    )
+    selfplay_window: int = _field(100, "games the self-play rule judges")
+    selfplay_threshold: float = _field(0.2, "the self-play rule's threshold")
     selfplay_pool: int = _field(1, "draw opponents from this many latest snapshots")
     eval_freq: int = _field(10_000, "evaluate every this many steps")
     eval_episodes: int = _field(50, "seeded episodes per evaluation")
@@ -178,10 +185,7 @@ class TrainConfig:
             raise ValueError(f"clip_range must be a positive number, got {self.clip_range}")
         if not math.isfinite(self.log_std_init):
             raise ValueError(f"log_std_init must be a finite number, got {self.log_std_init}")
-        if not -1 <= self.selfplay_threshold < 1:
-            raise ValueError(
-                f"selfplay_threshold must lie in [-1, 1), got {self.selfplay_threshold}"
-            )
+        check_rule(self.selfplay_rule, self.selfplay_threshold)
         if self.lr_schedule not in LR_SCHEDULES:
             raise ValueError(
                 f"unknown lr_schedule {self.lr_schedule!r}; allowed: {', '.join(LR_SCHEDULES)}"
@@ -197,6 +201,10 @@ class TrainConfig:
             raise ValueError(f"{self.env_id} has no opponent; self-play needs a two-player task")
         if self.self_play is None:
             self.self_play = two_player
+        if self.self_play:
+            # The paper's self-play task has no early draw for a still ball (SPEC §4); written
+            # into env_kwargs so that the run's evaluations play the game it trained on.
+            self.env_kwargs.setdefault("stagnation_steps", 0)
 
     def save(self, path: Path) -> None:
         """Write the configuration with the record of the physics it is about to train on.
@@ -212,6 +220,9 @@ class TrainConfig:
     def load(cls, path: Path) -> TrainConfig:
         data = json.loads(Path(path).read_text())
         names = {f.name for f in fields(cls)}
+        if data.get("self_play") and "selfplay_rule" not in data:
+            # Runs from before the rule was an option replaced their opponent on net score.
+            data["selfplay_rule"] = "net_score"
         config = cls(**{k: v for k, v in data.items() if k in names})
         config.net_arch = tuple(config.net_arch)
         return config

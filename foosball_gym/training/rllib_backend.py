@@ -3,10 +3,11 @@
 The two-player task is played as its PettingZoo game (:mod:`foosball_gym.multiagent`) on
 RLlib's multi-agent API. One module, ``learner``, plays ``home`` and is trained; ``away`` is
 played by frozen snapshots of it, ``opponent_<generation>``, drawn per episode from a pool.
-The pool follows :class:`~foosball_gym.training.selfplay.SelfPlayCallback`'s rule: once the
-learner's net score, (wins - losses) / games, over the last ``selfplay_window`` games exceeds
-``selfplay_threshold`` (0.2), a snapshot of the learner joins the pool, which keeps the last
-``selfplay_pool`` of them.
+The pool follows :class:`~foosball_gym.training.selfplay.SelfPlayCallback`'s rule
+(:mod:`~foosball_gym.training.selfplay_rule`): once the learner wins at least
+``selfplay_threshold`` (20 %) of the last ``selfplay_window`` games (or, with
+``selfplay_rule="net_score"``, its net score exceeds it), a snapshot of the learner joins the
+pool, which keeps the last ``selfplay_pool`` of them.
 
 A run directory looks like an SB3 run's (see :mod:`foosball_gym.training.files`)::
 
@@ -44,7 +45,6 @@ import random
 import shutil
 import time
 import warnings
-from collections import deque
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -65,6 +65,7 @@ from foosball_gym.training.files import (
     atomic_write_text,
     has_checkpoint,
 )
+from foosball_gym.training.selfplay_rule import ReplacementRule, history_record, restored_elo
 from foosball_gym.training.signals import SignalStop
 
 BACKEND = "rllib"
@@ -610,18 +611,21 @@ class _SelfPlay:
     """The pool of frozen opponents and the replacement rule, on the driver."""
 
     def __init__(self, config: TrainConfig, save_dir: Path) -> None:
-        self.window = config.selfplay_window
-        self.threshold = config.selfplay_threshold
+        self.rule = ReplacementRule(
+            config.selfplay_rule, config.selfplay_threshold, config.selfplay_window
+        )
         self.pool_size = config.selfplay_pool
         self.save_dir = save_dir
-        self.results: deque[int] = deque(maxlen=self.window)
         self.history: list[dict[str, Any]] = []
         self.pool: list[int] = []  # generations
-        self.games = 0
 
     @property
     def generation(self) -> int:
         return self.pool[-1] if self.pool else 0
+
+    @property
+    def games(self) -> int:
+        return self.rule.games
 
     @property
     def module_ids(self) -> tuple[str, ...]:
@@ -631,56 +635,41 @@ class _SelfPlay:
         """The pool's weights by module id, from ``history.json`` and the snapshots."""
         self.history = json.loads((self.save_dir / "history.json").read_text())
         self.pool = [h["generation"] for h in self.history][-self.pool_size :]
-        self.games = self.history[-1]["games"]
+        self.rule.games = self.history[-1]["games"]
+        self.rule.opponent_elo = restored_elo(self.history, self.pool)
         return {
             opponent_id(g): _load_tensors(self.save_dir / f"{opponent_id(g)}.pt") for g in self.pool
         }
 
-    def add(self, state: Mapping[str, Any], timesteps: int, net_score: float | None) -> int:
+    def add(self, state: Mapping[str, Any], timesteps: int, score: float | None, elo: float) -> int:
         """Record a snapshot of the learner's ``state``; returns its generation."""
         generation = self.generation + 1 if self.pool else 0
         self.save_dir.mkdir(parents=True, exist_ok=True)
         _save_tensors(state, self.save_dir / f"{opponent_id(generation)}.pt")
         self.pool = (self.pool + [generation])[-self.pool_size :]
         self.history.append(
-            {
-                "generation": generation,
-                "timesteps": int(timesteps),
-                "games": self.games,
-                "net_score": net_score,
-            }
+            history_record(generation, timesteps, self.games, self.rule, score, elo)
         )
+        self.rule.opponent_elo = restored_elo(self.history, self.pool)
         atomic_write_text(self.save_dir / "history.json", json.dumps(self.history, indent=1))
         return generation
 
-    def judge(self, games: list[int]) -> float | None:
-        """Count ``games``; the net score that earns a new snapshot, or None.
+    def judge(self, games: list[int]) -> tuple[float, float] | None:
+        """Count ``games``; the rule's score and the learner's rating where they earn a new
+        snapshot, or None.
 
         The games after the one that earns it are dropped, not counted towards the next
         opponent: they were played against the pool as it was.
         """
         for result in games:
-            self.results.append(int(result))
-            self.games += 1
-            if len(self.results) == self.window:
-                net = float(np.mean(self.results))
-                if net > self.threshold:
-                    self.results.clear()
-                    return net
+            replaced = self.rule.record(int(result))
+            if replaced is not None:
+                return replaced
         return None
 
     def rates(self) -> dict[str, float | None]:
-        if not self.results:
-            return {}
-        res = np.array(self.results)
-        return {
-            "selfplay/generation": self.generation,
-            "selfplay/win_rate": float((res > 0).mean()),
-            "selfplay/loss_rate": float((res < 0).mean()),
-            "selfplay/draw_rate": float((res == 0).mean()),
-            "selfplay/net_score": float(res.mean()),
-            "selfplay/games": self.games,
-        }
+        rates = self.rule.rates()
+        return {"selfplay/generation": self.generation, **rates} if rates else {}
 
 
 def _learner_state(algo: Any) -> dict[str, Any]:
@@ -842,7 +831,7 @@ def train_rllib(
                 head = _actor_layers(state)[-1][1]  # the bias: means, then log std
                 head[head.shape[0] // 2 :] = config.log_std_init
                 _set_modules(algo, {LEARNER: state})
-            selfplay.add(state, 0, None)
+            selfplay.add(state, 0, None, 0.0)
             _set_modules(algo, {opponent_id(0): state})
             _save_config(config, num_workers, out / CONFIG_FILE)
 
@@ -913,17 +902,19 @@ def train_rllib(
                 steps = done_steps + int(result.get("num_env_steps_sampled_lifetime", 0))
                 games = runners.get("selfplay_games")
                 games = [] if games is None or np.isscalar(games) else list(games)
-                net = selfplay.judge(games)
-                if net is not None:
+                replaced = selfplay.judge(games)
+                if replaced is not None:
+                    score, elo = replaced
                     state = _learner_state(algo)
-                    generation = selfplay.add(state, steps, net)
+                    generation = selfplay.add(state, steps, score, elo)
                     new_id = opponent_id(generation)
                     _add_opponent(algo, new_id, selfplay.module_ids)
                     _set_modules(algo, {new_id: state})
                     if verbose:
                         print(
                             f"self-play: opponent replaced by generation {generation} at "
-                            f"{steps} steps (net score {net:+.2f})"
+                            f"{steps} steps ({config.selfplay_rule} {score:+.2f}, "
+                            f"Elo {elo:+.0f})"
                         )
                 learner_stats = result.get("learners", {}).get(LEARNER, {})
                 board.scalars(

@@ -415,6 +415,7 @@ def train(
             SelfPlayCallback(
                 window=config.selfplay_window,
                 threshold=config.selfplay_threshold,
+                rule=config.selfplay_rule,
                 pool_size=config.selfplay_pool,
                 save_dir=out / "selfplay",
                 verbose=1,

@@ -8,16 +8,17 @@ Three pieces:
 - :class:`SelfPlayVecEnv` (around the Dummy/SubprocVecEnv): before each step it evaluates the
   opponents for all envs in one batched forward pass per opponent, then steps the envs.
 - :class:`SelfPlayCallback`: counts finished games, replaces the opponent by a snapshot of the
-  learner when the learner's net score over the last ``window`` games exceeds ``threshold``,
-  optionally keeps a pool of the last ``pool_size`` snapshots sampled per episode, logs to the
-  SB3 logger and saves every snapshot so a run can be resumed and its history inspected.
+  learner when the learner wins at least ``threshold`` of the last ``window`` games (the
+  paper's rule; the net score is an option, see
+  :mod:`~foosball_gym.training.selfplay_rule`), optionally keeps a pool of the last
+  ``pool_size`` snapshots sampled per episode, logs to the SB3 logger and saves every
+  snapshot so a run can be resumed and its history inspected.
 """
 
 from __future__ import annotations
 
 import json
 import time
-from collections import deque
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
+from foosball_gym.training.selfplay_rule import ReplacementRule, history_record, restored_elo
 from foosball_gym.training.snapshot import PolicySnapshot
 
 OPPONENT_OBS = "opponent_obs"
@@ -149,14 +151,19 @@ class SelfPlayCallback(BaseCallback):
     """Replace the opponent by the learner when the learner beats it (SPEC §4).
 
     Args:
-        window: games the net score is taken over (100).
-        threshold: net score, (wins - losses) / games, above which the opponent is replaced
-            (0.2).
+        window: games the rule judges (100).
+        threshold: the win rate at or above which (``rule="win_rate"``, the paper's), or the
+            net score, (wins - losses) / games, above which (``rule="net_score"``) the
+            opponent is replaced (0.2).
         pool_size: keep the last this many snapshots and draw each episode's opponent from them
             (1: always the latest).
         save_dir: where snapshots (``opponent_<generation>.pt``) and ``history.json`` go; None
             keeps nothing on disk.
         verbose: 1 prints each replacement.
+        rule: ``"win_rate"`` or ``"net_score"``.
+
+    TensorBoard gets the window's rates and ``selfplay/elo``, the learner's rating against its
+    opponents (see :class:`~foosball_gym.training.selfplay_rule.ReplacementRule`).
     """
 
     def __init__(
@@ -166,27 +173,25 @@ class SelfPlayCallback(BaseCallback):
         pool_size: int = 1,
         save_dir: str | Path | None = None,
         verbose: int = 0,
+        rule: str = "win_rate",
     ) -> None:
         super().__init__(verbose)
-        if window < 1:
-            raise ValueError(f"window must be at least 1 game, got {window}")
-        if not -1.0 <= threshold < 1.0:
-            raise ValueError(f"threshold must lie in [-1, 1), got {threshold}")
         if pool_size < 1:
             raise ValueError(f"pool_size must be at least 1, got {pool_size}")
-        self.window = window
-        self.threshold = threshold
+        self.judge = ReplacementRule(rule, threshold, window)
         self.pool_size = pool_size
         self.save_dir = None if save_dir is None else Path(save_dir)
-        self.results: deque[int] = deque(maxlen=window)
         self.pool: list[PolicySnapshot] = []
         self.history: list[dict[str, Any]] = []
-        self.games = 0
         self._env: SelfPlayVecEnv | None = None
 
     @property
     def generation(self) -> int:
         return self.pool[-1].generation if self.pool else 0
+
+    @property
+    def games(self) -> int:
+        return self.judge.games
 
     def _on_training_start(self) -> None:
         self._env = find_selfplay_env(self.model.get_env())
@@ -197,44 +202,35 @@ class SelfPlayCallback(BaseCallback):
         ):
             self._restore()
         if not self.pool:
-            self._add_snapshot(net_score=None)
+            self._add_snapshot(score=None, elo=0.0)
         self._env.set_pool(self.pool)
 
     def _on_step(self) -> bool:
         for done, info in zip(self.locals["dones"], self.locals["infos"]):
             if done:
-                self.results.append(game_result(info))
-                self.games += 1
-        if self.results:
-            res = np.array(self.results)
-            net = float(res.mean())
+                replaced = self.judge.record(game_result(info))
+                if replaced is not None:
+                    self._add_snapshot(*replaced)
+                    self._env.set_pool(self.pool)
+        rates = self.judge.rates()
+        if rates:
             self.logger.record("selfplay/generation", self.generation)
-            self.logger.record("selfplay/win_rate", float((res > 0).mean()))
-            self.logger.record("selfplay/loss_rate", float((res < 0).mean()))
-            self.logger.record("selfplay/draw_rate", float((res == 0).mean()))
-            self.logger.record("selfplay/net_score", net)
-            self.logger.record("selfplay/games", self.games)
-            if len(self.results) == self.window and net > self.threshold:
-                self._add_snapshot(net_score=net)
-                self._env.set_pool(self.pool)
-                self.results.clear()
+            for key, value in rates.items():
+                self.logger.record(key, value)
         return True
 
-    def _add_snapshot(self, net_score: float | None) -> None:
+    def _add_snapshot(self, score: float | None, elo: float) -> None:
         generation = self.generation + 1 if self.pool else 0
         snap = PolicySnapshot.of_model(self.model, generation=generation)
         self.pool = (self.pool + [snap])[-self.pool_size :]
-        record = {
-            "generation": generation,
-            "timesteps": int(self.num_timesteps),
-            "games": self.games,
-            "net_score": net_score,
-        }
-        self.history.append(record)
-        if self.verbose and net_score is not None:
+        self.history.append(
+            history_record(generation, self.num_timesteps, self.games, self.judge, score, elo)
+        )
+        self.judge.opponent_elo = restored_elo(self.history, [p.generation for p in self.pool])
+        if self.verbose and score is not None:
             print(
                 f"self-play: opponent replaced by generation {generation} at "
-                f"{self.num_timesteps} steps (net score {net_score:+.2f})"
+                f"{self.num_timesteps} steps ({self.judge.rule} {score:+.2f}, Elo {elo:+.0f})"
             )
         if self.save_dir is not None:
             self.save_dir.mkdir(parents=True, exist_ok=True)
@@ -248,4 +244,5 @@ class SelfPlayCallback(BaseCallback):
         self.history = json.loads((self.save_dir / "history.json").read_text())
         gens = [h["generation"] for h in self.history][-self.pool_size :]
         self.pool = [PolicySnapshot.load(self.save_dir / f"opponent_{g:04d}.pt") for g in gens]
-        self.games = self.history[-1]["games"]
+        self.judge.games = self.history[-1]["games"]
+        self.judge.opponent_elo = restored_elo(self.history, gens)

@@ -1,0 +1,142 @@
+"""When self-play replaces its opponent (SPEC §4), and the learner's rating while it trains.
+
+Shared by the Stable-Baselines3 callback and the RLlib backend, so both follow one rule.
+Needs neither PyTorch nor either learning library.
+
+The paper's rule is the default: a snapshot of the learner becomes the opponent once it wins
+at least ``threshold`` (20 %) of the last ``window`` games. The older net-score rule,
+(wins - losses) / games above ``threshold``, is kept as an option; it cannot fire when most
+games are drawn, which is what two good keepers mostly play.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+SELFPLAY_RULES = ("win_rate", "net_score")
+
+
+def check_rule(rule: str, threshold: float) -> None:
+    """Raise ValueError for an unknown rule or a threshold the rule can never meet sensibly."""
+    if rule not in SELFPLAY_RULES:
+        raise ValueError(f"unknown self-play rule {rule!r}; allowed: {', '.join(SELFPLAY_RULES)}")
+    # Written `not a < x <= b`, so that NaN fails too.
+    if rule == "win_rate" and not 0 < threshold <= 1:
+        raise ValueError(f"the win_rate rule's threshold must lie in (0, 1], got {threshold}")
+    if rule == "net_score" and not -1 <= threshold < 1:
+        raise ValueError(f"the net_score rule's threshold must lie in [-1, 1), got {threshold}")
+
+
+def performance_elo(results: np.ndarray, opponent_elo: float) -> float:
+    """The Elo rating that expects the score the learner made against ``opponent_elo``.
+
+    A win scores 1, a draw 1/2; all wins or all losses are taken as half a game short of it,
+    so the rating stays finite (at most 400·log10(2n - 1) from the opponent's).
+    """
+    n = len(results)
+    score = float(np.sum(np.asarray(results) + 1) / 2)
+    score = min(max(score, 0.5), n - 0.5) / n
+    return opponent_elo + 400.0 * math.log10(score / (1.0 - score))
+
+
+class ReplacementRule:
+    """Counts finished games (+1 won, 0 drawn, -1 lost) and says when the opponent is beaten.
+
+    Args:
+        rule: ``"win_rate"`` (wins / games at least ``threshold``) or ``"net_score"``
+            ((wins - losses) / games above ``threshold``).
+        threshold: see ``rule``.
+        window: the last this many games are judged; none is judged before the window is full.
+
+    The learner's Elo rating is its performance over the window against its opponents, whose
+    ratings are the learner's at the moment each was frozen (generation 0 rates 0); set
+    ``opponent_elo`` whenever the opponents change. With a pool of several opponents it is
+    their mean rating.
+    """
+
+    def __init__(self, rule: str = "win_rate", threshold: float = 0.2, window: int = 100) -> None:
+        check_rule(rule, threshold)
+        if window < 1:
+            raise ValueError(f"window must be at least 1 game, got {window}")
+        self.rule = rule
+        self.threshold = float(threshold)
+        self.window = int(window)
+        self.results: deque[int] = deque(maxlen=self.window)
+        self.games = 0
+        self.opponent_elo = 0.0
+
+    def score(self) -> float:
+        """The rule's measure over the games in the window."""
+        res = np.array(self.results)
+        if self.rule == "win_rate":
+            return float((res > 0).mean())
+        return float(res.mean())
+
+    def elo(self) -> float | None:
+        """The learner's rating over the window (None before its first game)."""
+        if not self.results:
+            return None
+        return performance_elo(np.array(self.results), self.opponent_elo)
+
+    def record(self, result: int) -> tuple[float, float] | None:
+        """Count one game; where it earns a new opponent, the rule's score and the learner's
+        rating, else None.
+
+        The window starts empty again after a replacement: the games before it were played
+        against the old opponent.
+        """
+        self.results.append(int(result))
+        self.games += 1
+        if len(self.results) < self.window:
+            return None
+        score = self.score()
+        due = score >= self.threshold if self.rule == "win_rate" else score > self.threshold
+        if not due:
+            return None
+        elo = self.elo()
+        self.results.clear()
+        return score, elo
+
+    def rates(self) -> dict[str, float]:
+        """What TensorBoard shows: the window's rates and the learner's rating."""
+        if not self.results:
+            return {}
+        res = np.array(self.results)
+        return {
+            "selfplay/win_rate": float((res > 0).mean()),
+            "selfplay/loss_rate": float((res < 0).mean()),
+            "selfplay/draw_rate": float((res == 0).mean()),
+            "selfplay/net_score": float(res.mean()),
+            "selfplay/games": self.games,
+            "selfplay/elo": performance_elo(res, self.opponent_elo),
+        }
+
+
+def history_record(
+    generation: int,
+    timesteps: int,
+    games: int,
+    rule: ReplacementRule,
+    score: float | None,
+    elo: float,
+) -> dict[str, Any]:
+    """One line of a run's ``selfplay/history.json``: a snapshot, when and why it was taken."""
+    return {
+        "generation": generation,
+        "timesteps": int(timesteps),
+        "games": int(games),
+        "rule": rule.rule,
+        "score": score,
+        "elo": float(elo),
+    }
+
+
+def restored_elo(history: list[dict[str, Any]], generations: list[int]) -> float:
+    """The mean rating of ``generations`` as ``history`` records them (0 where it has none:
+    runs from before ratings were recorded)."""
+    by_generation = {h["generation"]: h.get("elo") or 0.0 for h in history}
+    return float(np.mean([by_generation.get(g, 0.0) for g in generations]))

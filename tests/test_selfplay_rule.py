@@ -1,0 +1,121 @@
+"""The self-play replacement rule (SPEC §4) and the learner's rating, without a learner."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from foosball_gym.training.selfplay_rule import (
+    ReplacementRule,
+    performance_elo,
+    restored_elo,
+)
+
+WIN, DRAW, LOSS = 1, 0, -1
+
+
+def play(rule, results):
+    """Feed games; the replacements they earned, as (game number, score, elo)."""
+    fired = []
+    for i, result in enumerate(results, 1):
+        replaced = rule.record(result)
+        if replaced is not None:
+            fired.append((i, *replaced))
+    return fired
+
+
+def test_the_papers_rule_fires_on_a_fifth_of_wins_among_draws():
+    # 20 wins and 80 draws: what two keepers that mostly stop everything play.
+    games = [WIN] * 20 + [DRAW] * 80
+    fired = play(ReplacementRule("win_rate", 0.2, window=100), games)
+    assert [(n, score) for n, score, _ in fired] == [(100, 0.2)]
+    # The net score of the same games is 0.2, not above it: the old rule never fires.
+    assert play(ReplacementRule("net_score", 0.2, window=100), games) == []
+
+
+def test_below_the_threshold_nothing_fires_and_the_window_must_be_full():
+    assert play(ReplacementRule("win_rate", 0.2, window=100), [WIN] * 19 + [DRAW] * 81) == []
+    assert play(ReplacementRule("win_rate", 0.2, window=100), [WIN] * 99) == []
+
+
+def test_the_window_starts_over_after_a_replacement():
+    rule = ReplacementRule("win_rate", 0.5, window=4)
+    fired = play(rule, [WIN] * 4 + [LOSS] * 2 + [WIN] * 2 + [WIN] * 4)
+    # Game 8 judges games 5-8 (two losses, two wins), not 1-4 again.
+    assert [n for n, *_ in fired] == [4, 8, 12]
+    assert rule.games == 12
+
+
+def test_net_score_rule_counts_losses_against_wins():
+    games = [WIN] * 50 + [LOSS] * 25 + [DRAW] * 25
+    fired = play(ReplacementRule("net_score", 0.2, window=100), games)
+    assert [(n, score) for n, score, _ in fired] == [(100, 0.25)]
+
+
+@pytest.mark.parametrize(
+    "rule, threshold",
+    [
+        ("win_rate", 0.0),
+        ("win_rate", 1.5),
+        ("win_rate", math.nan),
+        ("net_score", 1.0),
+        ("elo", 0.2),
+    ],
+)
+def test_bad_rules_and_thresholds_are_refused(rule, threshold):
+    with pytest.raises(ValueError, match="allowed|must lie"):
+        ReplacementRule(rule, threshold)
+
+
+def test_performance_rating_is_elos_expected_score():
+    # Scoring 3 of 4 (75 %) is expected of a player 191 Elo above its opponent.
+    results = np.array([WIN, WIN, DRAW, DRAW])
+    elo = performance_elo(results, 100.0)
+    assert elo == pytest.approx(100.0 + 400 * math.log10(3), abs=1e-9)
+    expected = 1 / (1 + 10 ** ((100.0 - elo) / 400))
+    assert expected == pytest.approx(0.75)
+    # All draws: level with the opponent; all wins: finite.
+    assert performance_elo(np.zeros(10), 50.0) == pytest.approx(50.0)
+    assert math.isfinite(performance_elo(np.ones(10), 0.0))
+
+
+def test_ratings_rise_as_each_generation_beats_the_last():
+    rule = ReplacementRule("win_rate", 0.2, window=10)
+    history = [{"generation": 0, "elo": 0.0}]
+    for generation in range(1, 4):
+        ((_, _, elo),) = play(rule, [WIN] * 3 + [DRAW] * 7)
+        history.append({"generation": generation, "elo": elo})
+        rule.opponent_elo = restored_elo(history, [generation])
+    elos = [h["elo"] for h in history]
+    assert all(b > a for a, b in zip(elos, elos[1:]))
+    assert rule.rates() == {}  # the window starts empty after a replacement
+
+
+def test_self_play_trains_without_the_still_ball_draw_unless_asked():
+    from foosball_gym.training.config import TrainConfig
+
+    config = TrainConfig("Foosball-KeeperVsKeeper-v0")
+    config.check()
+    assert config.self_play and config.env_kwargs["stagnation_steps"] == 0
+    asked = TrainConfig("Foosball-KeeperVsKeeper-v0", env_kwargs={"stagnation_steps": 60})
+    asked.check()
+    assert asked.env_kwargs["stagnation_steps"] == 60
+    scripted = TrainConfig("Foosball-KeeperVsKeeper-v0", self_play=False)
+    scripted.check()
+    assert "stagnation_steps" not in scripted.env_kwargs
+
+
+def test_a_run_from_before_the_rule_was_an_option_keeps_the_net_score(tmp_path):
+    import json
+
+    from foosball_gym.training.config import TrainConfig
+
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps({"env_id": "Foosball-KeeperVsKeeper-v0", "self_play": True}))
+    assert TrainConfig.load(path).selfplay_rule == "net_score"
+    new = TrainConfig("Foosball-KeeperVsKeeper-v0")
+    new.check()
+    new.save(path)
+    assert TrainConfig.load(path).selfplay_rule == "win_rate"
