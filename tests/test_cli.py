@@ -27,6 +27,7 @@ needs_hardware = pytest.mark.skipif(
 MAIN_OPTIONS = {
     "train": ["env_id", "--timesteps", "--n-envs", "--algo", "--out", "--resume", "--env-kwarg"],
     "eval": ["target", "--policy", "--episodes", "--seed", "--opponent", "--json", "--video"],
+    "league": ["run", "--add", "--games", "--generations", "--no-scripted", "--out"],
     "play": ["model", "--table", "--env", "--episodes", "--camera", "--latency", "--log"],
     "calibrate": ["--table", "--frame", "--chessboard", "--pattern", "--square", "--home-side"],
     "envs": ["registered environments"],

@@ -161,6 +161,10 @@ def test_two_env_runners_train_a_run_that_evaluates_and_resumes(tmp_path):
     assert action.shape == (2,) and np.all(np.abs(action) <= 1)
     # foosball eval takes the run directory as it is: no export, no trust flag.
     assert main(["eval", str(out), "--episodes", "3", "--seed", "0"]) == 0
+    # foosball league rates its generations, read from the snapshots RLlib's modules left.
+    assert main(["league", str(out), "--games", "2", "--generations", "2"]) == 0
+    league = json.loads((out / "league.json").read_text())
+    assert [p["name"] for p in league["players"]][-2:] == ["final", "scripted"]
 
     # Resuming continues the count, the pool and the curve from the last checkpoint.
     config["timesteps"] = result.timesteps + 1000

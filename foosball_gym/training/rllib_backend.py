@@ -369,6 +369,25 @@ def load_rllib_policy(run_dir: str | Path) -> RllibPolicy:
     )
 
 
+def load_rllib_snapshot(path: str | Path, config: Mapping[str, Any]) -> RllibPolicy:
+    """A self-play snapshot (``selfplay/opponent_<generation>.pt``, a module's full state) of
+    the run whose ``config.json`` is ``config``, as a deterministic policy: the actor only,
+    its Gaussian's means as the action, like :func:`export_policy` writes it."""
+    state = _load_tensors(Path(path))
+    layers = _actor_layers(state)
+    act_size = int(np.asarray(layers[-1][0]).shape[0]) // 2
+    weights = [
+        (np.asarray(w, dtype=np.float32), np.asarray(b, dtype=np.float32)) for w, b in layers
+    ]
+    weights[-1] = (weights[-1][0][:act_size], weights[-1][1][:act_size])
+    return RllibPolicy(
+        weights,
+        "tanh",  # what export_policy records for every module this backend trains
+        env_id=config.get("env_id"),
+        env_kwargs=config.get("env_kwargs") or {},
+    )
+
+
 # --------------------------------------------------------------------------- tensors on disk
 
 

@@ -1,0 +1,119 @@
+"""``foosball league``: rate a self-play run's generations against each other and the field."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from foosball_gym.cli.common import (
+    CliError,
+    add_trust_argument,
+    check_directory,
+    load_model,
+    parse_env_kwargs,
+    positive_int,
+    seed,
+)
+
+MOST_GENERATIONS = 8
+
+
+def add_parser(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "league",
+        help="Elo ratings of a self-play run's generations, round-robin",
+        description="Play every saved generation of a self-play run, its final policy, the "
+        "scripted side and any --add MODEL against each other, round-robin, and rate them "
+        "(Elo, maximum likelihood, 95 %% bootstrap intervals). Prints the table and writes "
+        "league.json and league.png into the run directory (or --out).",
+    )
+    p.add_argument("run", help="a self-play run directory (foosball train on a two-player task)")
+    p.add_argument(
+        "--add",
+        action="append",
+        default=[],
+        metavar="MODEL",
+        help="another player: a run dir, a model .zip or builtin:NAME (repeatable)",
+    )
+    p.add_argument(
+        "--games", type=positive_int, default=20, help="games each pair plays (%(default)s)"
+    )
+    p.add_argument(
+        "--generations",
+        type=positive_int,
+        default=MOST_GENERATIONS,
+        metavar="N",
+        help="rate at most N generations, evenly spread, first and last kept (%(default)s)",
+    )
+    p.add_argument("--seed", type=seed, default=0, help="seed of the first game (%(default)s)")
+    p.add_argument(
+        "--no-scripted", action="store_true", help="leave the scripted side out of the league"
+    )
+    p.add_argument(
+        "--env-kwarg",
+        action="append",
+        metavar="KEY=VALUE",
+        help="an environment option over the run's (repeatable), e.g. stagnation_steps=60 "
+        "to end a game as a draw once the ball lies still",
+    )
+    p.add_argument("--out", metavar="DIR", help="where league.json and league.png go (the run)")
+    add_trust_argument(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from foosball_gym.training import require_train_extra
+
+    require_train_extra()
+    from foosball_gym.training.league import (
+        SCRIPTED,
+        Player,
+        read_run,
+        rising,
+        run_league,
+        run_players,
+        write_league,
+    )
+
+    out = Path(args.out or args.run)
+    if args.out:
+        check_directory("--out", out)
+    try:
+        read_run(args.run)
+    except ValueError as err:
+        raise CliError(str(err)) from None
+    env_overrides = parse_env_kwargs(args.env_kwarg)
+    try:
+        players, config = run_players(args.run, args.generations, trust=args.trust_model)
+    except ValueError as err:
+        raise CliError(str(err)) from None
+    for spec in args.add:
+        loaded = load_model(spec, args.trust_model)
+        players.append(Player(spec, loaded.policy))
+    if not args.no_scripted:
+        players.append(Player(SCRIPTED, None))
+    env_kwargs = {**config.get("env_kwargs", {}), **env_overrides}
+    pairs = len(players) * (len(players) - 1) // 2
+    print(
+        f"league of {len(players)} players on {config['env_id']}: {pairs} pairs x "
+        f"{args.games} games"
+    )
+    try:
+        league = run_league(
+            players,
+            config["env_id"],
+            env_kwargs,
+            games=args.games,
+            seed=args.seed,
+            progress=print,
+        )
+    except (ValueError, TypeError) as err:
+        raise CliError(str(err)) from None
+    print(league.table())
+    trend = rising(league)
+    if trend == trend:  # not NaN
+        print(f"rank correlation of rating with training steps: {trend:+.2f}")
+    json_path, png = write_league(league, out)
+    print("wrote " + " and ".join(str(p) for p in (json_path, png) if p))
+    return 0
