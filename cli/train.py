@@ -24,6 +24,12 @@ from foosball_gym.cli.common import (
 )
 from foosball_gym.cli.distributed import add_rllib_arguments, run_from_args
 from foosball_gym.training.config import ALGORITHMS, LR_SCHEDULES, VEC_ENV_KINDS, TrainConfig
+from foosball_gym.training.config_file import (
+    SHIPPED,
+    ConfigFileError,
+    load_train_config,
+    shipped_configs,
+)
 from foosball_gym.training.files import CONFIG_FILE, has_checkpoint
 from foosball_gym.training.rllib_backend import BACKEND, read_backend
 from foosball_gym.training.selfplay_rule import SELFPLAY_RULES
@@ -73,6 +79,16 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--out", metavar="DIR", help="run directory (default runs/ENV-seedN)")
     p.add_argument(
         "--resume", metavar="DIR", help="continue the run in DIR from its last checkpoint"
+    )
+    shipped = ", ".join(SHIPPED + name for name in shipped_configs())
+    p.add_argument(
+        "--config",
+        metavar="FILE.yaml|builtin:ENV_ID",
+        help="training settings from a YAML file: the fields these options set, spelled "
+        "n_envs, learning_rate, ..., also net_arch, gamma and the others without an option, "
+        "env_kwargs, and env_id (the ENV_ID given here must agree); or a shipped one: "
+        f"{shipped}. Options given here override the file; the defaults shown below apply "
+        "only where neither sets a value",
     )
     for name, spelling in OPTIONS.items():
         f = fields_by_name[name]
@@ -129,12 +145,26 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         for name in (*OPTIONS, *SWITCHED)
         if getattr(args, name) is not None
     }
-    return TrainConfig(env_id=args.env_id, env_kwargs=parse_env_kwargs(args.env_kwarg), **chosen)
+    env_kwargs = parse_env_kwargs(args.env_kwarg)
+    if not args.config:
+        return TrainConfig(env_id=args.env_id, env_kwargs=env_kwargs, **chosen)
+    try:
+        return load_train_config(args.config, args.env_id, chosen, env_kwargs)
+    except ConfigFileError as err:
+        raise CliError(f"--config {err}") from None
+    except (ValueError, TypeError) as err:  # an option's value, checked with the file's
+        raise CliError(str(err)) from None
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.resume and args.config:
+        raise CliError(
+            f"--config {args.config} with --resume {args.resume}: a run continues with the "
+            f"settings in its {CONFIG_FILE}; leave --config out"
+        )
     if args.backend == BACKEND or (args.resume and read_backend(args.resume) == BACKEND):
-        config = None if args.resume or not args.env_id else config_from_args(args)
+        named = args.env_id or args.config
+        config = None if args.resume or not named else config_from_args(args)
         return run_from_args(args, config)
     from foosball_gym.training import require_train_extra
 
@@ -152,8 +182,10 @@ def run(args: argparse.Namespace) -> int:
         if not has_checkpoint(out):
             print(f"{out} has no checkpoint yet: starting the run over from its {CONFIG_FILE}")
     else:
-        if not args.env_id:
-            raise CliError("give an environment id (see `foosball envs`) or --resume DIR")
+        if not args.env_id and not args.config:
+            raise CliError(
+                "give an environment id (see `foosball envs`), --config FILE or --resume DIR"
+            )
         config = config_from_args(args)
         out = Path(args.out or f"runs/{config.env_id}-seed{config.seed}")
         check_directory("--out", out)

@@ -353,3 +353,104 @@ def test_every_package_is_listed_for_installation():
     }
     assert "foosball_gym.tasks" in found
     assert found - listed == set()
+
+
+# Where the modules the environments can import start: the packages that build and play the
+# simulated game, and vision, whose camera estimated_state=True imitates. What they import is
+# followed from here (see env_side).
+ENV_ROOTS = (
+    "foosball_gym.registration",
+    "foosball_gym.catalog",
+    "foosball_gym.envs",
+    "foosball_gym.estimation",
+    "foosball_gym.vision",
+    "foosball_gym.tasks",
+    "foosball_gym.game",
+    "foosball_gym.interface",
+    "foosball_gym.policies",
+    "foosball_gym.simulator",
+    "foosball_gym.table",
+)
+# Packages with an extra beyond train (the real table; PettingZoo and Ray) or the training side.
+OWN_EXTRAS = (
+    "foosball_gym.training",
+    "foosball_gym.multiagent",
+    "foosball_gym.hardware",
+    "foosball_gym.play",
+    "foosball_gym.sim_table",
+)
+# The import names of each distribution whose own name (lower case, - as _) is not one.
+IMPORT_NAMES = {
+    "opencv-python-headless": ("cv2",),
+    "opencv-python": ("cv2",),
+    "pyyaml": ("yaml",),
+    "python-can": ("can",),
+    "pybullet": ("pybullet", "pybullet_utils"),
+}
+
+
+def requirement_imports(setup_cfg: Path, extra: str) -> set[str]:
+    """The import names of install_requires and of the extra ``extra`` in ``setup_cfg``."""
+    import configparser
+    import re
+
+    config = configparser.ConfigParser(interpolation=None)
+    config.read(setup_cfg)
+    lines = [
+        *config["options"]["install_requires"].splitlines(),
+        *config["options.extras_require"][extra].splitlines(),
+    ]
+    names = {re.match(r"[A-Za-z0-9][\w.-]*", line.strip())[0].lower() for line in lines if line}
+    return {i for name in names for i in IMPORT_NAMES.get(name, (name.replace("-", "_"),))}
+
+
+def env_side() -> dict[str, Path]:
+    """The modules the environments can import: ENV_ROOTS and every module they import, inside
+    functions too (an option imports there)."""
+    modules = module_files({"foosball_gym": PACKAGE})
+    graph = import_graph(modules)
+    reached, todo = (
+        set(),
+        [m for m in modules for r in ENV_ROOTS if m == r or m.startswith(r + ".")],
+    )
+    while todo:
+        module = todo.pop()
+        if module not in reached:
+            reached.add(module)
+            todo.extend(graph[module])
+    return {name: modules[name] for name in reached}
+
+
+def undeclared_imports(setup_cfg: Path) -> dict[str, set[str]]:
+    """Each module the environments can import, with the third-party packages it imports that
+    neither install_requires nor the train extra of ``setup_cfg`` installs."""
+    declared = requirement_imports(setup_cfg, "train")
+    missing = {
+        name: {
+            m
+            for m in imported_modules(path)
+            if m not in sys.stdlib_module_names and m != "foosball_gym" and m not in declared
+        }
+        for name, path in env_side().items()
+    }
+    return {name: found for name, found in missing.items() if found}
+
+
+def test_the_environments_reach_no_package_with_an_extra_of_its_own():
+    reached = env_side()
+    assert {"foosball_gym.envs.block", "foosball_gym.estimation.kalman"} <= set(reached)
+    outside = sorted(m for m in reached for p in OWN_EXTRAS if m == p or m.startswith(p + "."))
+    assert outside == []
+
+
+def test_every_environment_option_works_with_the_train_extra():
+    """``pip install -e ".[train]"`` installs every third-party package the environments can
+    import, estimated_state's filterpy included."""
+    assert undeclared_imports(PACKAGE.parent / "setup.cfg") == {}
+
+
+def test_the_extra_check_finds_a_package_the_train_extra_lacks(tmp_path):
+    text = (PACKAGE.parent / "setup.cfg").read_text()
+    setup_cfg = tmp_path / "setup.cfg"
+    setup_cfg.write_text("\n".join(line for line in text.splitlines() if "filterpy" not in line))
+    assert undeclared_imports(setup_cfg) == {"foosball_gym.estimation.kalman": {"filterpy"}}

@@ -1,0 +1,202 @@
+"""``foosball train --config``: hyperparameters from a YAML file, the command line over them,
+the shipped files, and errors that name the file and the key."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, fields
+from importlib.util import find_spec
+
+import pytest
+
+from foosball_gym import ENV_IDS
+from foosball_gym.cli import build_parser, main
+from foosball_gym.training.config import TrainConfig
+from foosball_gym.training.config_file import config_path, load_train_config, shipped_configs
+
+needs_train = pytest.mark.skipif(
+    any(find_spec(m) is None for m in ("stable_baselines3", "torch", "yaml")),
+    reason='needs the train extra: pip install "foosball_gym[train]"',
+)
+pytestmark = pytest.mark.skipif(find_spec("yaml") is None, reason="needs PyYAML (the train extra)")
+
+# 3e-4 without a dot is text to YAML 1.1 (PyYAML's), a number to anyone who writes one.
+SCORE_FILE = """\
+# a test's settings
+env_id: Foosball-Score-v0
+env_kwargs:
+  ball_start: incoming
+  goal_reward: 500
+timesteps: 1234
+n_envs: 3
+learning_rate: 3e-4
+net_arch: [64, 32]
+gamma: 0.98
+normalize: false
+target_success: 0.9
+"""
+
+
+def config_of(argv: list[str]) -> TrainConfig:
+    from foosball_gym.cli.train import config_from_args
+
+    return config_from_args(build_parser().parse_args(["train", *argv]))
+
+
+@pytest.fixture
+def score_file(tmp_path):
+    path = tmp_path / "score.yaml"
+    path.write_text(SCORE_FILE)
+    return str(path)
+
+
+def test_the_files_values_reach_the_configuration(score_file):
+    config = config_of(["--config", score_file])
+    assert config.env_id == "Foosball-Score-v0"
+    assert (config.timesteps, config.n_envs, config.learning_rate) == (1234, 3, 3e-4)
+    assert (config.net_arch, config.gamma, config.normalize) == ((64, 32), 0.98, False)
+    assert config.target_success == 0.9
+    # What neither the file nor the command line sets is TrainConfig's.
+    assert config.batch_size == TrainConfig("Foosball-Score-v0").batch_size
+
+
+def test_an_option_given_overrides_the_file_and_one_left_out_does_not(score_file):
+    config = config_of(
+        ["Foosball-Score-v0", "--config", score_file, "--n-envs", "2", "--learning-rate", "1e-3"]
+    )
+    assert (config.n_envs, config.learning_rate) == (2, 1e-3)
+    # --timesteps and --no-normalize were not given: the file's values stand, not the defaults.
+    assert (config.timesteps, config.normalize) == (1234, False)
+
+
+def test_env_kwargs_merge_key_by_key(score_file):
+    config = config_of(["--config", score_file, "--env-kwarg", "goal_reward=10"])
+    assert config.env_kwargs == {"ball_start": "incoming", "goal_reward": 10}
+
+
+def test_the_file_may_set_every_field_of_the_configuration(tmp_path):
+    """A file spells each field as TrainConfig holds it, also those without an option."""
+    wanted = TrainConfig("Foosball-KeeperVsKeeper-v0", self_play=True, target_kl=0.02)
+    path = tmp_path / "all.yaml"
+    # JSON is YAML; asdict's tuple becomes a list, as a file writes net_arch.
+    path.write_text(json.dumps(asdict(wanted)))
+    assert load_train_config(str(path)) == wanted
+    assert {f.name for f in fields(TrainConfig)} == set(asdict(wanted))
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_each_environment_has_a_shipped_file_that_loads_into_a_valid_configuration(env_id):
+    assert shipped_configs() == sorted(ENV_IDS)
+    path = config_path(f"builtin:{env_id}")
+    assert path.read_text().startswith(f"# {env_id}"), "a shipped file says what it is for"
+    config = load_train_config(f"builtin:{env_id}")  # checked with TrainConfig.check
+    assert config.env_id == env_id
+    assert config_of([env_id, "--config", f"builtin:{env_id}"]) == config
+
+
+def test_the_block_file_holds_the_readmes_main_job():
+    config = load_train_config("builtin:Foosball-Block-v0")
+    assert (config.pretrain_episodes, config.target_success) == (200, 0.95)
+
+
+def write(tmp_path, text: str) -> str:
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    return str(path)
+
+
+BLOCK = "env_id: Foosball-Block-v0\n"
+
+
+@needs_train
+@pytest.mark.parametrize(
+    "text, argv, message",
+    [
+        (BLOCK + "n_env: 3\n", [], "unknown key 'n_env'; allowed: env_id, env_kwargs, algo"),
+        (BLOCK + "n_envs: eight\n", [], "n_envs: takes a whole number, got 'eight'"),
+        (BLOCK + "net_arch: 64\n", [], "net_arch: takes a list of whole numbers, got 64"),
+        (BLOCK + "target_kl: yes\n", [], "target_kl: takes a number or null, got True"),
+        (BLOCK + "timesteps: 0\n", [], "timesteps must be at least 1, got 0"),
+        (BLOCK + "algo: dqn\n", [], "algo: unknown algorithm 'dqn'; allowed: ppo, sac"),
+        (BLOCK + "target_success: 2.0\n", [], "target_success must lie in (0, 1]"),
+        (BLOCK + "self_play: true\n", [], "self_play: Foosball-Block-v0 has no opponent"),
+        (BLOCK + "env_kwargs: {warp: 3}\n", [], "env_kwargs: BlockEnv has no option 'warp'"),
+        ("env_id: Foosball-Nothing-v0\n", [], "env_id: unknown environment 'Foosball-Nothing"),
+        (BLOCK, ["Foosball-Score-v0"], "env_id: is 'Foosball-Block-v0', but the command line"),
+        ("n_envs: 2\n", [], "names no env_id"),
+        (BLOCK + "n_envs: 2\nn_envs: 3\n", [], "line 3, column 1: key 'n_envs' is given twice"),
+        (BLOCK + "n_envs: [2\n", [], "is not valid YAML: line 3"),
+        ("- n_envs\n", [], "must be a mapping of TrainConfig fields"),
+    ],
+)
+def test_a_bad_file_exits_with_status_2_and_one_line_naming_the_file_and_the_key(
+    text, argv, message, tmp_path, capsys
+):
+    path = write(tmp_path, text)
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", *argv, "--config", path, "--no-progress", "--out", str(tmp_path / "r")])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if ": error: " in line]
+    assert len(errors) == 1, err
+    assert f"--config {path}: " in errors[0] and message in errors[0], err
+    assert not (tmp_path / "r").exists()
+
+
+@needs_train
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--config", "missing.yaml"], "--config missing.yaml: no such file"),
+        (
+            ["--config", "Foosball-Block-v0"],
+            "no such file (the shipped one is builtin:Foosball-Block-v0)",
+        ),
+        (
+            ["--config", "builtin:Foosball-Nothing-v0"],
+            "no shipped configuration; shipped: builtin:Foosball-Block-v0, builtin:Foosball-",
+        ),
+        (["--config", "builtin:Foosball-Block-v0", "--resume", "runs/x"], "leave --config out"),
+    ],
+)
+def test_a_file_that_cannot_be_used_exits_with_status_2_naming_it(
+    argv, message, tmp_path, monkeypatch, capsys
+):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", *argv, "--no-progress"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if ": error: " in line]
+    assert len(errors) == 1 and message in errors[0], err
+
+
+@needs_train
+def test_an_option_out_of_range_with_a_file_is_the_command_lines_error(score_file, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", "--config", score_file, "--target-success", "2", "--no-progress"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert "target_success must lie in (0, 1]" in err and "--config" not in err
+
+
+@needs_train
+def test_a_run_from_a_file_records_the_files_values_in_its_config_json(tmp_path, capsys):
+    path = tmp_path / "small.yaml"
+    path.write_text(
+        "# kept small, as the CLI tests keep their runs\n"
+        "env_id: Foosball-Block-v0\n"
+        "env_kwargs: {goal_reward: 500}\n"
+        "timesteps: 100000\n"
+        "n_envs: 1\nn_steps: 128\nbatch_size: 64\n"
+        "learning_rate: 3e-4\ngamma: 0.98\nnet_arch: [32, 32]\n"
+        "eval_freq: 256\neval_episodes: 2\ncheckpoint_freq: 256\n"
+    )
+    run = tmp_path / "run"
+    argv = ["train", "--config", str(path), "--timesteps", "256", "--no-progress"]
+    assert main([*argv, "--out", str(run)]) == 0
+    config = json.loads((run / "config.json").read_text())
+    assert config["timesteps"] == 256  # the command line's
+    assert (config["learning_rate"], config["gamma"], config["net_arch"]) == (3e-4, 0.98, [32, 32])
+    assert (config["env_id"], config["env_kwargs"]) == ("Foosball-Block-v0", {"goal_reward": 500})
+    assert (run / "model.zip").exists()
