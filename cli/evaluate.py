@@ -22,7 +22,7 @@ from foosball_gym.cli.common import (
     scripted,
     seed,
 )
-from foosball_gym.evaluation import evaluate
+from foosball_gym.evaluation import evaluate, video_format
 
 
 def add_parser(subparsers: Any) -> None:
@@ -57,7 +57,25 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument(
         "--json", metavar="FILE.json", help="also write the results here (default: nowhere)"
     )
-    p.add_argument("--video", metavar="FILE.mp4", help="record the first episode")
+    p.add_argument(
+        "--video",
+        metavar="FILE.mp4|FILE.gif",
+        help="record the first episode(s) into this file, .mp4 or .gif by its suffix",
+    )
+    p.add_argument(
+        "--video-episodes",
+        type=positive_int,
+        metavar="N",
+        help="record the first N episodes, one after the other, into --video "
+        f"({defaults['video_episodes'].default}; at most --episodes)",
+    )
+    p.add_argument(
+        "--video-stride",
+        type=positive_int,
+        metavar="N",
+        help="keep every Nth frame of --video, which still plays in real time "
+        "(default: every frame for .mp4, about 20 a second for .gif)",
+    )
     p.set_defaults(func=run)
 
 
@@ -66,6 +84,26 @@ def run(args: argparse.Namespace) -> int:
         check_writable("--json", args.json)
     if args.video is not None:
         check_writable("--video", args.video)
+        try:
+            video_format(args.video)
+        except ValueError as err:
+            raise CliError(f"--video {err}") from None
+    else:
+        # Without a video they would do nothing, and say nothing about it.
+        for option, value in (
+            ("--video-episodes", args.video_episodes),
+            ("--video-stride", args.video_stride),
+        ):
+            if value is not None:
+                raise CliError(f"{option} {value} needs --video FILE to record into")
+    video_episodes = args.video_episodes or (
+        inspect.signature(evaluate).parameters["video_episodes"].default
+    )
+    if video_episodes > args.episodes:
+        raise CliError(
+            f"--video-episodes {video_episodes} is more than --episodes {args.episodes}: "
+            "only episodes that run can be recorded"
+        )
     env_kwargs = parse_env_kwargs(args.env_kwarg)
     if args.policy == "scripted":
         env_id = args.target
@@ -97,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
             policy_name=name,
             opponent_name=opponent_name,
             video=args.video,
+            video_episodes=video_episodes,
+            video_stride=args.video_stride,
         )
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None

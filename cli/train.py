@@ -57,6 +57,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "selfplay_threshold": {"type": float},
     "selfplay_pool": {"type": positive_int},
     "target_success": {"type": float},
+    "video_every": {"type": positive_int, "metavar": "N"},
 }
 # The boolean fields, set by switches.
 SWITCHED = ("self_play", "normalize", "normalize_reward")

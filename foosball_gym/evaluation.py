@@ -1,8 +1,9 @@
 """Seeded evaluation of a policy: success rate with a confidence interval, goals, rewards.
 
 Needs neither PyTorch nor Stable-Baselines3: a policy is any callable from an observation to
-an action, so the scripted baselines are evaluated on the base install. Recording a video
-needs OpenCV, from the ``train`` or the ``hardware`` extra.
+an action, so the scripted baselines are evaluated on the base install. Recording an .mp4
+video needs OpenCV, from the ``train`` or the ``hardware`` extra; a .gif needs Pillow, which
+the ``train`` extra brings with matplotlib.
 """
 
 from __future__ import annotations
@@ -19,6 +20,18 @@ import numpy as np
 from foosball_gym.catalog import check_env_id
 
 Policy = Callable[[np.ndarray], Any]
+
+VIDEO_SUFFIXES = (".mp4", ".gif")
+# GIF delays are whole hundredths of a second and browsers play a delay under 2 of them as
+# 10, so a GIF faster than 50 frames a second would play slower, not faster.
+GIF_MAX_FPS = 50
+# About 20 frames a second keeps a GIF small enough for a README and the ball's path smooth.
+GIF_FPS = 20
+# 64 colours hold the table's few flat colours and their shading; more only add size.
+GIF_COLOURS = 64
+# How long a video holds each recorded episode's last frame, so that its end can be seen
+# before the next one starts (or a GIF starts over).
+EPISODE_PAUSE_S = 0.5
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -83,6 +96,8 @@ def evaluate(
     policy_name: str = "policy",
     opponent_name: str | None = None,
     video: str | Path | None = None,
+    video_episodes: int = 1,
+    video_stride: int | None = None,
 ) -> EvalResult:
     """Run ``episodes`` episodes seeded ``seed, seed + 1, ...`` and summarise them.
 
@@ -90,39 +105,58 @@ def evaluate(
         policy: a callable from one observation to one action.
         env_id, env_kwargs: the environment.
         opponent: for two-player envs, the away side's policy (None: the env's default).
-        video: write the first episode, rendered, to this .mp4 file.
+        video: write the first ``video_episodes`` episodes, rendered, one after the other
+            into this file: .mp4 or .gif, by its suffix. Frames are 640 x 360 unless
+            ``env_kwargs`` give ``render_width`` and ``render_height``.
+        video_episodes: how many episodes ``video`` holds, 1 to ``episodes``.
+        video_stride: keep every this many frames (None: all of them for .mp4, about
+            20 a second for .gif, every 3rd at 60 Hz); the video still plays in real time.
 
     Raises:
         ValueError: ``episodes`` is below 1, ``env_id`` is not registered, an option has a
-            bad value (TypeError where the environment has no such option), or a policy that
-            says the size of the observations it takes (``observation_size``) takes others.
+            bad value (TypeError where the environment has no such option), a policy that
+            says the size of the observations it takes (``observation_size``) takes others,
+            or a video option is out of range (see :func:`video_format`). All of these are
+            raised before the first episode runs.
+        ImportError: the video needs OpenCV or Pillow, and it is not installed.
     """
     if episodes < 1:
         raise ValueError(f"episodes must be at least 1, got {episodes}")
+    if video is not None:
+        video_format(video)
+        if not 1 <= video_episodes <= episodes:
+            raise ValueError(
+                f"video_episodes must lie between 1 and episodes ({episodes}), got {video_episodes}"
+            )
+        if video_stride is not None and video_stride < 1:
+            raise ValueError(f"video_stride must be at least 1, got {video_stride}")
     check_env_id(env_id)
     kwargs = dict(env_kwargs or {})
     if video is not None:
-        kwargs.update(render_mode="rgb_array", render_width=640, render_height=360)
+        kwargs["render_mode"] = "rgb_array"
+        kwargs.setdefault("render_width", 640)
+        kwargs.setdefault("render_height", 360)
     env = gym.make(env_id, **kwargs)
+    writer = None
     try:
         _check_fits(policy, policy_name, env_id, env)
         if opponent is not None:
             _check_fits(opponent, opponent_name or "opponent", env_id, env)
-    except ValueError:
+        if video is not None:
+            writer = open_video(video, env.metadata["render_fps"], video_stride)
+    except Exception:
         env.close()
         raise
     if opponent is not None:
         env.unwrapped.set_opponent(opponent)
     rewards, lengths = [], []
     successes = goals_for = goals_against = 0
-    writer = None
     try:
         for i in range(episodes):
             obs, info = env.reset(seed=seed + i)
-            record = video is not None and i == 0
+            record = writer is not None and i < video_episodes
             if record:
-                writer = _VideoWriter(video, env.metadata["render_fps"])
-                writer.add(env.render())
+                writer.add(env.render)
             total, steps, done = 0.0, 0, False
             while not done:
                 obs, reward, terminated, truncated, info = env.step(policy(obs))
@@ -130,10 +164,12 @@ def evaluate(
                 steps += 1
                 done = terminated or truncated
                 if record:
-                    writer.add(env.render())
+                    writer.add(env.render)
             if record:
-                writer.close()
-                writer = None
+                writer.end_episode(env.render)
+                if i + 1 == video_episodes:
+                    writer.close()
+                    writer = None
             rewards.append(total)
             lengths.append(steps)
             successes += bool(info["is_success"])
@@ -179,31 +215,172 @@ def _check_fits(policy: Policy, name: str, env_id: str, env: gym.Env) -> None:
         )
 
 
+def video_format(path: str | Path) -> str:
+    """The kind of video ``path`` names by its suffix: ``".mp4"`` or ``".gif"``.
+
+    Raises:
+        ValueError: any other suffix, or none.
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix not in VIDEO_SUFFIXES:
+        has = f"not {suffix}" if suffix else "and it has none"
+        raise ValueError(
+            f"{path}: a video's suffix must be one of {', '.join(VIDEO_SUFFIXES)}, {has}"
+        )
+    return suffix
+
+
+def open_video(path: str | Path, fps: float, stride: int | None = None) -> _VideoWriter:
+    """A writer of episodes rendered at ``fps`` frames a second to ``path`` (.mp4 or .gif).
+
+    Args:
+        stride: keep every this many frames (None: every frame for .mp4, about
+            :data:`GIF_FPS` a second for .gif); the video still plays in real time.
+
+    Raises:
+        ValueError: an unsupported suffix, or a .gif whose stride leaves more than
+            :data:`GIF_MAX_FPS` frames a second.
+        ImportError: OpenCV (.mp4) or Pillow (.gif) is not installed.
+    """
+    if video_format(path) == ".gif":
+        if stride is None:
+            stride = max(1, round(fps / GIF_FPS), math.ceil(fps / GIF_MAX_FPS))
+        if fps / stride > GIF_MAX_FPS:
+            raise ValueError(
+                f"a GIF plays at most {GIF_MAX_FPS} frames a second and the environment renders "
+                f"{fps:g}: give a frame stride of {math.ceil(fps / GIF_MAX_FPS)} or more, "
+                f"not {stride}"
+            )
+        return _GifWriter(path, fps, stride)
+    return _Mp4Writer(path, fps, stride or 1)
+
+
 class _VideoWriter:
+    """Episodes' frames, every ``stride``-th kept, to a video that plays in real time.
+
+    Frames come as the env's ``render``, called only for the frames kept: rendering is most
+    of a video's cost. Each episode starts with its first frame and ends with its last one,
+    whatever the stride, so that the video shows how every episode ended.
+    """
+
+    def __init__(self, path: str | Path, fps: float, stride: int) -> None:
+        self.path = str(path)
+        self.stride = stride
+        self.fps = fps / stride
+        self._count = 0
+        self._skipped = False
+
+    def add(self, render: Callable[[], np.ndarray]) -> None:
+        """The env's next frame, ``render()``, called where the stride keeps it."""
+        self._skipped = self._count % self.stride != 0
+        if not self._skipped:
+            self._write(render())
+        self._count += 1
+
+    def end_episode(self, render: Callable[[], np.ndarray]) -> None:
+        """Show the episode's last frame, ``render()``, held for :data:`EPISODE_PAUSE_S`."""
+        if self._skipped:
+            self._write(render())
+            self._skipped = False
+        self._hold(EPISODE_PAUSE_S)
+        self._count = 0
+
+    def _write(self, frame: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def _hold(self, seconds: float) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+
+class _Mp4Writer(_VideoWriter):
     """Frames to an .mp4 file with OpenCV."""
 
-    def __init__(self, path: str | Path, fps: float) -> None:
+    def __init__(self, path: str | Path, fps: float, stride: int) -> None:
         try:
             import cv2
         except ImportError as err:
             raise ImportError(
-                "recording video needs OpenCV, which the train and hardware extras install: "
-                'pip install "foosball_gym[train]"'
+                "recording an .mp4 video needs OpenCV, which the train and hardware extras "
+                'install: pip install "foosball_gym[train]"'
             ) from err
+        super().__init__(path, fps, stride)
         self._cv2 = cv2
-        self.path = str(path)
-        self.fps = fps
         self._writer = None
+        self._last: np.ndarray | None = None
 
-    def add(self, frame: np.ndarray) -> None:
+    def _write(self, frame: np.ndarray) -> None:
         if self._writer is None:
             h, w = frame.shape[:2]
             fourcc = self._cv2.VideoWriter_fourcc(*"mp4v")
             self._writer = self._cv2.VideoWriter(self.path, fourcc, self.fps, (w, h))
             if not self._writer.isOpened():
                 raise OSError(f"cannot write a video to {self.path}")
-        self._writer.write(self._cv2.cvtColor(frame, self._cv2.COLOR_RGB2BGR))
+        self._last = self._cv2.cvtColor(frame, self._cv2.COLOR_RGB2BGR)
+        self._writer.write(self._last)
+
+    def _hold(self, seconds: float) -> None:
+        for _ in range(round(seconds * self.fps)):
+            self._writer.write(self._last)
 
     def close(self) -> None:
         if self._writer is not None:
             self._writer.release()
+            self._writer = None
+
+
+class _GifWriter(_VideoWriter):
+    """Frames to a looping .gif file with Pillow, kept in memory until :meth:`close`.
+
+    Every frame takes the first frame's palette, without dithering: the camera stands still,
+    so a frame differs from the one before only where something moved, and Pillow stores
+    only that rectangle. Frames are one byte a pixel while they wait (230 kB at 640 x 360).
+    """
+
+    def __init__(self, path: str | Path, fps: float, stride: int) -> None:
+        try:
+            from PIL import Image
+        except ImportError as err:
+            raise ImportError(
+                "recording a .gif needs Pillow, which the train extra installs with "
+                'matplotlib: pip install "foosball_gym[train]"'
+            ) from err
+        super().__init__(path, fps, stride)
+        self._image = Image
+        self._frames: list[Any] = []
+        self._seconds: list[float] = []
+
+    def _write(self, frame: np.ndarray) -> None:
+        Image = self._image
+        image = Image.fromarray(np.ascontiguousarray(frame[..., :3]))
+        if self._frames:
+            image = image.quantize(palette=self._frames[0], dither=Image.Dither.NONE)
+        else:
+            image = image.quantize(GIF_COLOURS, dither=Image.Dither.NONE)
+        self._frames.append(image)
+        self._seconds.append(1 / self.fps)
+
+    def _hold(self, seconds: float) -> None:
+        if self._seconds:
+            self._seconds[-1] += seconds
+
+    def _durations_ms(self) -> list[int]:
+        # GIF delays are whole hundredths: each frame ends at its time rounded to one, so
+        # that rounding errors do not add up and the GIF plays in real time.
+        ends = np.round(np.cumsum(self._seconds) * 100).astype(int)
+        return [10 * int(d) for d in np.diff(ends, prepend=0)]
+
+    def close(self) -> None:
+        if not self._frames:
+            return
+        frames, self._frames = self._frames, []
+        frames[0].save(
+            self.path,
+            format="GIF",
+            save_all=True,
+            append_images=frames[1:],
+            duration=self._durations_ms(),
+            loop=0,
+        )

@@ -27,6 +27,7 @@ from foosball_gym.training.rllib_backend import (  # noqa: E402
     POLICY_FILE,
     POLICY_INFO_FILE,
     _SelfPlay,
+    check_rllib_config,
     export_policy,
     load_rllib_policy,
     train_rllib,
@@ -130,6 +131,20 @@ def test_opponent_is_replaced_by_the_rule_both_backends_share(tmp_path):
     score, _ = sp.judge([0, 0, 1, 0])
     assert score == pytest.approx(0.25)
     assert TrainConfig(ENV).selfplay_rule == "win_rate"
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"algo": "sac"}, "trains PPO only"),
+        ({"self_play": False}, "by self-play"),
+        ({"pretrain_episodes": 10}, "does not pretrain"),
+        ({"video_every": 1000}, "writes no clips"),
+    ],
+)
+def test_what_the_rllib_backend_cannot_train_is_refused(overrides, message):
+    with pytest.raises(ValueError, match=message):
+        check_rllib_config(TrainConfig(ENV, **overrides), num_workers=1)
 
 
 def test_rllib_options_parse():

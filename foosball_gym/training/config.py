@@ -138,6 +138,9 @@ class TrainConfig:
         None, "stop once an evaluation reaches this success rate, 0-1"
     )
     torch_threads: int = _field(1, "PyTorch's threads")
+    video_every: int | None = _field(
+        None, "write a short clip of the policy to RUN/videos/ every this many steps"
+    )
 
     def check(self) -> None:
         """Raise ValueError with what is allowed for anything out of range."""
@@ -194,6 +197,15 @@ class TrainConfig:
             raise ValueError(f"target_kl must be positive, got {self.target_kl}")
         if self.target_success is not None and not 0 < self.target_success <= 1:
             raise ValueError(f"target_success must lie in (0, 1], got {self.target_success}")
+        if self.video_every is not None and (
+            isinstance(self.video_every, bool)
+            or not isinstance(self.video_every, int)
+            or self.video_every < 1
+        ):
+            raise ValueError(
+                "video_every must be a whole number of steps, at least 1, or None (no clips), "
+                f"got {self.video_every!r}"
+            )
         env = gym.make(self.env_id, **self.env_kwargs)  # raises on a bad env option
         two_player = bool(env.unwrapped.layout.opponent)
         env.close()

@@ -12,6 +12,8 @@ A run directory holds::
     best/                  the model of the best evaluation so far
     tb/                    TensorBoard logs
     selfplay/              opponent snapshots and history.json (self-play runs)
+    videos/                step_<timesteps>.mp4 clips of the policy (with --video-every)
+    league.json, .png      the league's ratings (``foosball league``, self-play runs)
 
 Runs from before plain files stored the statistics as ``vecnormalize.pkl``, a pickle, read
 only where trusted (see :mod:`.storage`).

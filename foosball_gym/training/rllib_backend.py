@@ -466,6 +466,11 @@ def check_rllib_config(config: TrainConfig, num_workers: int) -> None:
         )
     if config.pretrain_episodes:
         raise ValueError("the rllib backend does not pretrain; leave pretrain_episodes at 0")
+    if config.video_every is not None:
+        raise ValueError(
+            "the rllib backend writes no clips; leave video_every out, or record the run "
+            "afterwards with foosball eval RUN --video FILE"
+        )
     if not isinstance(num_workers, int) or num_workers < 0:
         raise ValueError(f"num_workers must be 0 or more, got {num_workers!r}")
 

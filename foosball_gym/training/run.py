@@ -8,15 +8,18 @@ from __future__ import annotations
 
 import csv
 import json
+import random
 import shutil
 import signal
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch as th
 from stable_baselines3 import PPO, SAC
@@ -172,6 +175,11 @@ class EvalCurveCallback(BaseCallback):
         self._next += self.config.eval_freq
         return self.run_eval()
 
+    def pause_clock(self, seconds: float) -> None:
+        """Leave ``seconds`` out of the curve's ``wall_seconds``: time spent on what is no
+        part of learning (recording clips), so that runs compare on their training time."""
+        self._start += seconds
+
     def run_eval(self) -> bool:
         policy = PolicySnapshot.of_model(self.model)
         res = evaluate(
@@ -211,6 +219,98 @@ class EvalCurveCallback(BaseCallback):
             self.reached = row
             return False
         return True
+
+
+VIDEO_DIR = "videos"
+# Apart from the evaluations' seeds (1_000_000 on), and the same for every clip of a run, so
+# that its clips show the same episodes played better and better.
+VIDEO_SEED = 2_000_000
+# A clip holds up to 3 episodes, as many as fit in 1200 steps (20 s at 60 Hz), and at least
+# one: 3 of Block's, a single match of the two-player games.
+VIDEO_MAX_EPISODES = 3
+VIDEO_STEPS = 1200
+# Every 2nd frame (30 a second at 60 Hz) halves the rendering, most of a clip's cost.
+VIDEO_STRIDE = 2
+
+
+def clip_episodes(env_id: str) -> int:
+    """How many episodes a training clip of ``env_id`` holds."""
+    max_steps = gym.spec(env_id).max_episode_steps or VIDEO_STEPS
+    return max(1, min(VIDEO_MAX_EPISODES, VIDEO_STEPS // max_steps))
+
+
+@contextmanager
+def _global_rng_kept() -> Iterator[None]:
+    """Restore Python's, NumPy's and PyTorch's global generators on leaving.
+
+    Training draws from them (PPO's actions and minibatches, SAC's noise); what runs in
+    between, such as building a policy snapshot, must leave them as it found them, or a run
+    would learn differently for having recorded a clip.
+    """
+    py, np_state, th_state = random.getstate(), np.random.get_state(), th.get_rng_state()
+    try:
+        yield
+    finally:
+        random.setstate(py)
+        np.random.set_state(np_state)
+        th.set_rng_state(th_state)
+
+
+class VideoCallback(BaseCallback):
+    """Every ``config.video_every`` steps write ``videos/step_NNNNNNNNN.mp4``: the current
+    policy playing :func:`clip_episodes` seeded episodes, deterministically.
+
+    The clip plays on an env of its own, seeded from :data:`VIDEO_SEED`, with the observation
+    normalisation the policy sees in training, against the env's scripted opponent in
+    two-player tasks (as the evaluations in eval.csv do), not the self-play opponent of the
+    moment. It changes nothing training depends on: the global generators are restored after
+    it, and its time is left out of eval.csv's ``wall_seconds``.
+    """
+
+    def __init__(
+        self, config: TrainConfig, out: Path, curve: EvalCurveCallback | None = None
+    ) -> None:
+        super().__init__()
+        if config.video_every is None:
+            raise ValueError("VideoCallback needs config.video_every")
+        self.config = config
+        self.every = config.video_every
+        self.dir = out / VIDEO_DIR
+        self.curve = curve
+        self._next = 0
+
+    def _on_training_start(self) -> None:
+        self._next = (self.num_timesteps // self.every + 1) * self.every
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self._next:
+            self._next += self.every
+            self.record()
+        return True
+
+    def record(self) -> Path:
+        """Write the clip of the policy now; its path."""
+        start = time.perf_counter()
+        self.dir.mkdir(parents=True, exist_ok=True)
+        path = self.dir / f"step_{self.num_timesteps:09d}.mp4"
+        # The writer picks the container by the suffix: the temporary name keeps it.
+        tmp = path.with_name(path.stem + ".tmp.mp4")
+        episodes = clip_episodes(self.config.env_id)
+        with _global_rng_kept():
+            evaluate(
+                PolicySnapshot.of_model(self.model),
+                self.config.env_id,
+                self.config.env_kwargs,
+                episodes=episodes,
+                seed=VIDEO_SEED,
+                video=tmp,
+                video_episodes=episodes,
+                video_stride=VIDEO_STRIDE,
+            )
+        tmp.replace(path)
+        if self.curve is not None:
+            self.curve.pause_clock(time.perf_counter() - start)
+        return path
 
 
 def read_curve(csv_path: Path) -> list[dict[str, float]]:
@@ -315,7 +415,7 @@ class TrainResult:
 
 # What a start that failed may leave in a run directory without a checkpoint; a new start
 # clears it so that its curve and best model are its own.
-_STALE = ("eval.csv", "eval.png", "pretrain.json", BEST_DIR, "selfplay")
+_STALE = ("eval.csv", "eval.png", "pretrain.json", BEST_DIR, "selfplay", VIDEO_DIR)
 
 
 def train(
@@ -423,6 +523,8 @@ def train(
         )
     curve = EvalCurveCallback(config, out, wall_offset)
     own.append(curve)
+    if config.video_every is not None:
+        own.append(VideoCallback(config, out, curve))
 
     start = time.perf_counter()
     remaining = max(config.timesteps - done_steps, 0)
