@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +25,13 @@ import gymnasium as gym
 import numpy as np
 
 from foosball_gym.ratings import Ratings, fit_ratings
-from foosball_gym.training.files import CONFIG_FILE, atomic_write_text
+from foosball_gym.training.files import (
+    CHECKPOINT_DIR,
+    CONFIG_FILE,
+    LATEST_FILE,
+    MODEL_FILE,
+    atomic_write_text,
+)
 
 SCRIPTED = "scripted"
 SELFPLAY_DIR = "selfplay"
@@ -304,7 +311,16 @@ def run_players(
 
 
 def _final_timesteps(run_dir: Path) -> int | None:
-    latest = run_dir / "checkpoints" / "latest.json"
+    """The steps the run's final policy trained for, where the run says."""
+    model = run_dir / MODEL_FILE
+    if model.is_file():
+        try:
+            with zipfile.ZipFile(model) as archive:
+                # SB3's "data" member is JSON: read without unpickling anything.
+                return int(json.loads(archive.read("data"))["num_timesteps"])
+        except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+            pass
+    latest = run_dir / CHECKPOINT_DIR / LATEST_FILE
     if latest.is_file():
         return json.loads(latest.read_text()).get("timesteps")
     return None
