@@ -9,6 +9,7 @@ from typing import Any
 from foosball_gym.cli.common import (
     CliError,
     LibraryDefault,
+    _has_display,
     add_env_arguments,
     check_model_fits,
     given,
@@ -93,6 +94,27 @@ def add_parser(subparsers: Any) -> None:
         help="run the simulated table on the wall clock, its camera in a process of its own, "
         "instead of in lock-step with the loop on simulated time (deterministic)",
     )
+    p.add_argument(
+        "--gui",
+        action="store_true",
+        help="watch the simulated table in the PyBullet GUI, the serve and the score written "
+        "in the window (needs a display); the table runs lock-step paced to the wall clock, "
+        "slower where the machine cannot keep up, or with --realtime on the wall clock itself",
+    )
+    p.add_argument(
+        "--human",
+        action="store_true",
+        help="play the away keeper yourself against the policy, from the keyboard of the GUI "
+        "window (implies --gui; the key map is printed at the start); two-player "
+        "environments only: Foosball-KeeperVsKeeper-v0, Foosball-FullGame-v0",
+    )
+    p.add_argument(
+        "--human-rod",
+        metavar="NAME",
+        help="the away rod --human drives: keeper (the default), or in Foosball-FullGame-v0 "
+        "also defense, midfield, offense; the others play as the task's opponent (implies "
+        "--human)",
+    )
     p.add_argument("--log", metavar="FILE.jsonl", help="log every loop to this file")
     p.add_argument("--no-status", action="store_true", help="no live status line")
     p.set_defaults(func=run)
@@ -114,6 +136,17 @@ def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
     return loaded.policy, env_id, env_kwargs
 
 
+def _check_human(env_id: str, env_kwargs: dict[str, Any], human: str, rod: str | None) -> None:
+    """Fail where a person cannot play ``human`` in the environment."""
+    from foosball_gym.play.human import human_rod
+    from foosball_gym.tasks import task_interface
+
+    try:
+        human_rod(env_id, task_interface(env_id, env_kwargs).layout, human)
+    except ValueError as err:
+        raise CliError(f"{'--human-rod ' + rod if rod else '--human'}: {err}") from None
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         from foosball_gym.play.stack import play_real, play_sim
@@ -123,9 +156,30 @@ def run(args: argparse.Namespace) -> int:
         ) from None
     from foosball_gym.hardware.config import ConfigError, load_config
     from foosball_gym.hardware.safety import SafetyError
+    from foosball_gym.sim_table.viewer_process import WindowError
     from foosball_gym.tasks import task_interface
 
+    human = args.human_rod or ("keeper" if args.human else None)
+    gui = args.gui or human is not None
+    if gui and args.table != "sim":
+        raise CliError("--gui and --human play on the simulated table: give --table sim")
     policy, env_id, env_kwargs = _policy(args)
+    if human is not None:
+        _check_human(env_id, env_kwargs, human, args.human_rod)
+    if gui and not _has_display():
+        option = "--human" if human is not None else "--gui"
+        raise CliError(
+            f"{option} opens the PyBullet GUI, which needs a display, and DISPLAY is not set; "
+            "run under xvfb-run to try it without one"
+        )
+    if human is not None:
+        from foosball_gym.play.human import key_map_text
+
+        print(
+            f"You play the away {human.removeprefix('away_')}, defending the goal on the right. "
+            "Click the PyBullet window to give it the keyboard. Keys:"
+        )
+        print(key_map_text(), flush=True)
     try:
         if args.table == "sim":
             report = play_sim(
@@ -137,6 +191,11 @@ def run(args: argparse.Namespace) -> int:
                 latency_s=args.latency,
                 status=not args.no_status,
                 realtime=args.realtime,
+                gui=gui,
+                human=human,
+                # A person follows the game at the wall clock's speed; paced lock-step slows
+                # down on a machine that cannot keep up instead of tripping the watchdog.
+                pace=gui and not args.realtime,
                 **given(args, "seed", "camera_size"),
             )
         else:
@@ -150,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
                 latency_s=args.latency,
                 status=not args.no_status,
             )
-    except (ConfigError, ValueError, OSError) as err:
+    except (ConfigError, ValueError, OSError, WindowError) as err:
         raise CliError(str(err)) from None
     except SafetyError as err:
         print(f"\nstopped: {err}", file=sys.stderr)

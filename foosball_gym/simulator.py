@@ -82,6 +82,19 @@ with _quiet_stdout():
 
 NO_GOAL, HOME_SCORED, AWAY_SCORED = T.NO_GOAL, T.HOME_SCORED, T.AWAY_SCORED
 
+# The names :meth:`TableSim.keyboard_events` gives PyBullet's codes of keys without a character.
+_KEY_NAMES = {
+    pybullet.B3G_LEFT_ARROW: "left",
+    pybullet.B3G_RIGHT_ARROW: "right",
+    pybullet.B3G_UP_ARROW: "up",
+    pybullet.B3G_DOWN_ARROW: "down",
+    pybullet.B3G_SPACE: "space",
+    pybullet.B3G_RETURN: "return",
+}
+# Where :meth:`TableSim.show_text` writes: beyond the side walls, a line apart (m).
+_TEXT_MARGIN = 0.09
+_TEXT_LINE = 0.04
+
 CONTROL_MODES = ("position", "velocity", "torque")
 
 
@@ -324,7 +337,13 @@ class TableSim:
         )
         if gui:
             self._p.configureDebugVisualizer(pybullet.COV_ENABLE_GUI, 0)
+            # Shadows add nothing to a view from above, and a software renderer (a virtual
+            # display) drawing them held every call to the simulator up by 28 ms.
+            self._p.configureDebugVisualizer(pybullet.COV_ENABLE_SHADOWS, 0)
+            # Looking down with the home goal on the left: the screen's right is +x, its up +y.
             self._p.resetDebugVisualizerCamera(1.1, 0, -89.9, [0, 0, 0])
+        self._text_items: list[tuple[str, int]] = []
+        self._keyboard_taken = False
         with _quiet_stdout():
             self.body = self._p.loadURDF(_urdf_with_rods(names), useFixedBase=True)
         joint_index = {}
@@ -764,6 +783,59 @@ class TableSim:
             self._p.resetJointState(self.body, idx, float(value), 0.0)
         self._p.resetBasePositionAndOrientation(self.ball, [float(v) for v in ball], [0, 0, 0, 1])
         self._ball_cache = self._joint_cache = None
+
+    # ----------------------------------------------------------------------------- the GUI
+
+    def show_text(self, lines: Sequence[str]) -> None:
+        """Write ``lines`` in the GUI window, the first above the table and the others below
+        it, replacing what the last call wrote; without the GUI, nothing."""
+        if not self.gui:
+            return
+        lines = list(lines)
+        for i, line in enumerate(lines):
+            shown = self._text_items[i] if i < len(self._text_items) else None
+            if shown is not None and shown[0] == line:
+                continue
+            beyond = T.FIELD_HALF_WIDTH + _TEXT_MARGIN
+            y = beyond if i == 0 else -(beyond + (i - 1) * _TEXT_LINE)
+            item = self._p.addUserDebugText(
+                line,
+                [-T.FIELD_HALF_LENGTH, y, 0.1],
+                textColorRGB=[0, 0, 0],
+                textSize=1.5,
+                replaceItemUniqueId=shown[1] if shown is not None else -1,
+            )
+            if shown is None:
+                self._text_items.append((line, item))
+            else:
+                self._text_items[i] = (line, item)
+        for _, item in self._text_items[len(lines) :]:
+            self._p.removeUserDebugItem(item)
+        del self._text_items[len(lines) :]
+
+    def keyboard_events(self) -> tuple[frozenset[str], frozenset[str]]:
+        """The keys held down in the GUI window now, and those pressed since the last call.
+
+        Keys are named ``"left"``, ``"right"``, ``"up"``, ``"down"``, ``"space"``,
+        ``"return"`` or by their lower-case character. The first call turns off the GUI's
+        own single-key shortcuts (wireframe, ...), which would fight a player's keys.
+        Without the GUI there are no keys.
+        """
+        if not self.gui:
+            return frozenset(), frozenset()
+        if not self._keyboard_taken:
+            self._p.configureDebugVisualizer(pybullet.COV_ENABLE_KEYBOARD_SHORTCUTS, 0)
+            self._keyboard_taken = True
+        held, pressed = set(), set()
+        for code, state in self._p.getKeyboardEvents().items():
+            name = _KEY_NAMES.get(code) or (chr(code).lower() if 32 < code < 127 else None)
+            if name is None:
+                continue
+            if state & pybullet.KEY_IS_DOWN:
+                held.add(name)
+            if state & pybullet.KEY_WAS_TRIGGERED:
+                pressed.add(name)
+        return frozenset(held), frozenset(pressed)
 
     def figurine_positions(self) -> np.ndarray:
         """World centres of every figurine on the rods in play, (N, 3), rod by rod."""

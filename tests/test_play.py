@@ -218,3 +218,27 @@ def test_real_time_frames_show_the_ball_where_it_was_when_they_were_taken():
         assert times == sorted(times)
     finally:
         table.close()
+
+
+def test_a_paced_lock_step_table_never_runs_ahead_of_the_wall_clock():
+    interface = task_interface("Foosball-Block-v0")
+    config = sim_table_config(interface)
+    paced = SimulatedTable("Foosball-Block-v0", {}, config, pace=True)
+    free = SimulatedTable("Foosball-Block-v0", {}, sim_table_config(interface))
+    try:
+        for table in (paced, free):
+            table.serve()
+        start = time.monotonic()
+        for _ in range(30):
+            paced.step()
+        paced_wall = time.monotonic() - start
+        for _ in range(30):
+            free.step()
+        # Still lock-step: the same simulated time for the same steps.
+        assert paced.time == pytest.approx(free.time)
+        # A lower bound only (a slow machine makes it longer, never shorter); the first step
+        # sets the pace, so 29 control periods must have passed.
+        assert paced_wall >= 29 * paced.sim.control_dt - 1e-3
+    finally:
+        paced.close()
+        free.close()

@@ -23,6 +23,7 @@ from foosball_gym.estimation import BallFilter, TableStateEstimator
 from foosball_gym.hardware.config import TableConfig
 from foosball_gym.hardware.drives import TableDrives
 from foosball_gym.interface.task import TaskInterface
+from foosball_gym.play.human import KEY_HINT, HumanOpponent, human_rod
 from foosball_gym.play.loop import STAGES, LoopRecord, PlayLoop, StatusLine
 from foosball_gym.play.session import SessionLog
 from foosball_gym.vision import (
@@ -202,23 +203,53 @@ def play_sim(
     status: bool = False,
     camera_size: tuple[int, int] | None = None,
     realtime: bool = False,
+    gui: bool = False,
+    human: str | None = None,
+    pace: bool = False,
 ) -> PlayReport:
     """Play ``episodes`` served balls on the simulated table, through the whole stack.
 
     ``realtime`` runs the table on the wall clock (see
     :mod:`foosball_gym.sim_table.simulated_table`); the default is lock-step. The camera's
     frames are 640 x 360 in lock-step and 320 x 180 in real time unless ``camera_size`` says.
+
+    ``gui`` opens the PyBullet GUI on the table, with the serve and the score written in the
+    window. ``human`` names the away rod (``"keeper"``, or in Foosball-FullGame-v0 also
+    ``"defense"``, ``"midfield"``, ``"offense"``) a person drives from the window's keyboard
+    (:mod:`foosball_gym.play.human`) against the policy, the other away rods played by the
+    task's opponent; it opens the GUI. Neither changes the clock: ``pace`` keeps a lock-step
+    table from running ahead of the wall clock, which ``foosball play --gui`` chooses.
+
+    Closing the window ends the game after the serve in play.
+
+    Raises:
+        ValueError: ``human`` names no away rod of the task (or the task has no away side).
+        WindowError: the GUI window could not be opened (no display); a RuntimeError.
     """
     from foosball_gym.sim_table.simulated_table import SimulatedTable, sim_table_config
     from foosball_gym.tasks import task_interface
 
     if camera_size is None:
-        camera_size = REALTIME_CAMERA if realtime else LOCKSTEP_CAMERA
+        # A paced table renders in the loop's own time: the small frame keeps it near real time.
+        camera_size = REALTIME_CAMERA if realtime or pace else LOCKSTEP_CAMERA
     interface = task_interface(env_id, env_kwargs)
+    rod = None if human is None else human_rod(env_id, interface.layout, human)
+    gui = gui or rod is not None
     config = sim_table_config(interface)
     table = SimulatedTable(
-        env_id, env_kwargs, config, seed=seed, camera_size=camera_size, realtime=realtime
+        env_id,
+        env_kwargs,
+        config,
+        seed=seed,
+        camera_size=camera_size,
+        realtime=realtime,
+        gui=gui,
+        pace=pace,
     )
+    if rod is not None:
+        keys = table.keyboard_events
+        dt = table.sim.control_dt
+        table.set_opponent(HumanOpponent(keys, interface.layout, rod, dt, table.opponent))
     calibration = CameraCalibration.from_camera_model(table.camera_model)
     config.camera["calibration"] = calibration.to_dict()
     perception = build_perception(config, interface, latency_s)
@@ -244,8 +275,10 @@ def play_sim(
             table.step()  # the drives report their state once before the first decision
             loop.start()
             record = None
-            for _ in range(episodes):
+            for serve in range(1, episodes + 1):
                 table.serve()
+                if gui:
+                    table.show_text(_score_lines(report, table, serve, episodes, rod))
                 if record is not None and realtime:
                     # The table's clock runs on while the camera shows the new ball: the rods
                     # keep their last targets, and the watchdog hears the loop is alive.
@@ -268,17 +301,34 @@ def play_sim(
                                 )
                             )
                         )
-                    if goal or out:
+                    if goal and gui:
+                        table.show_text(_score_lines(report, table, serve, episodes, rod))
+                    closed = gui and not table.window_open
+                    if goal or out or table.stagnated or closed:
                         break
                 report.episodes += 1
                 report.successes += table.success
                 report.goals_for += table.goals_for
                 report.goals_against += table.goals_against
+                if gui and not table.window_open:
+                    break  # a person closed the window: the game ends with this serve
     finally:
         if log is not None:
             log.close()
         table.close()
     return report
+
+
+def _score_lines(
+    report: PlayReport, table: Any, serve: int, episodes: int, human: str | None
+) -> list[str]:
+    """What the GUI window shows: the serve and the score, and who the person plays."""
+    goals_for = report.goals_for + table.goals_for
+    goals_against = report.goals_against + table.goals_against
+    lines = [f"serve {serve} of {episodes}   goals for {goals_for}, against {goals_against}"]
+    if human is not None:
+        lines.append(f"you: {human.replace('_', ' ')} (right)   {KEY_HINT}")
+    return lines
 
 
 # The real-time camera renders in a process of its own, which 320 x 180 frames keep well

@@ -7,11 +7,22 @@ Two ways to keep time:
 
 - **lock-step** (``realtime=False``): time is simulated; one :meth:`SimulatedTable.step` is
   one control step, taken when the loop asks. Deterministic, for tests.
+- **paced lock-step** (``pace=True``): lock-step, but a step never runs ahead of the wall
+  clock, so a person watching sees the game at real speed where the machine keeps up and
+  slower where it does not; supervision stays on the table's clock, so a slow machine slows
+  the game instead of stopping it.
 - **real time** (``realtime=True``): a thread steps the table at the control rate of the wall
   clock, whatever the loop is doing, as a real table moves; the camera renders in a process of
   its own (:mod:`~foosball_gym.sim_table.camera_process`). :meth:`SimulatedTable.step` then
   waits for the next control step, and a loop that comes after its step has passed is late:
   its command acts one step later. Late steps are counted.
+
+With ``gui=True`` a PyBullet GUI window shows the table
+(:mod:`~foosball_gym.sim_table.viewer_process`): a person watches it (:meth:`show_text` writes
+the score in it) or plays the away side from its keyboard (:meth:`keyboard_events`, read by an
+opponent that :meth:`set_opponent` sets).
+A serve ends as the task's episodes do: at a goal, with the ball off the table, or with the
+ball lying still for the task's ``stagnation_steps``.
 """
 
 from __future__ import annotations
@@ -33,6 +44,7 @@ from foosball_gym.interface.task import TaskInterface
 from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
 from foosball_gym.sim_table.camera_process import CameraProcess
 from foosball_gym.sim_table.drives import SimulatedDrives
+from foosball_gym.sim_table.viewer_process import ViewerProcess
 from foosball_gym.simulator import TableSim
 from foosball_gym.tasks import interface_of, make_task
 
@@ -86,6 +98,8 @@ class SimulatedTable:
         seed: seeds the serves (and the opponent's randomness, if any).
         camera_size: (width, height) of the rendered camera frames.
         realtime: keep the wall clock's time (see the module's docstring) instead of lock-step.
+        gui: show the table in a PyBullet GUI window (needs a display).
+        pace: in lock-step, keep steps from running ahead of the wall clock.
     """
 
     def __init__(
@@ -96,19 +110,30 @@ class SimulatedTable:
         seed: int = 0,
         camera_size: tuple[int, int] = (640, 360),
         realtime: bool = False,
+        gui: bool = False,
+        pace: bool = False,
     ) -> None:
         task, options = make_task(env_id, env_kwargs)
         physics = check_physics(*(options.get(k, d) for k, d in PHYSICS_DEFAULTS.items()))
+        stagnation = options.get("stagnation_steps", 0)
+        # As the environment checks it.
+        if not isinstance(stagnation, (int, np.integer)) or stagnation < 0:
+            raise ValueError(f"stagnation_steps must be a non-negative integer, got {stagnation!r}")
         self.sim = TableSim(task.layout.rods, **dict(zip(PHYSICS_DEFAULTS, physics)))
         self.realtime = bool(realtime)
+        self.pace = bool(pace) and not self.realtime
+        self._paced_from: float | None = None
         self._t0 = time.monotonic()
         self.time = 0.0
         self.steps = 0
         self.late_steps = 0
         self._camera: CameraProcess | None = None
+        self._viewer: ViewerProcess | None = None
         self._thread: threading.Thread | None = None
         try:
-            self.game = Game(task, interface_of(task, options), self.sim)
+            self.game = Game(
+                task, interface_of(task, options), self.sim, stagnation_steps=stagnation
+            )
             self.rng = np.random.default_rng(seed)
             self.game.start(task.sample_start(self.rng))
             self.camera_model = CameraModel(*camera_size)
@@ -116,12 +141,19 @@ class SimulatedTable:
             self.drives = SimulatedDrives(config, self.sim, clock=self.clock)
             if self.realtime:
                 self._camera = CameraProcess(task.layout.rods, *camera_size)
+            if gui:
+                self._viewer = ViewerProcess(task.layout.rods)
+                self._viewer.show(*self.sim.scene())
         except BaseException:
             self.close()
             raise
         self._lock = threading.RLock()
         self._ticked = threading.Condition(self._lock)
-        self._events: list[tuple[int, bool]] = []
+        self._events: list[tuple[int, bool, bool]] = []
+        self._stagnated = False
+        # The goals since the serve (for, against), and whether the ball is dead.
+        self._score = [0, 0]
+        self._dead = False
         self._waiting = False
         self._stop = threading.Event()
         # The true ball of the last few steps, for comparing delayed frames' estimates with.
@@ -172,7 +204,7 @@ class SimulatedTable:
             if time.monotonic() > next_tick + dt:
                 next_tick = time.monotonic() + dt
 
-    def _tick(self) -> tuple[int, bool]:
+    def _tick(self) -> tuple[int, bool, bool]:
         if self.game.task.layout.opponent:
             self.drives.set_free_targets(self.game.opponent_targets())
         self.drives.apply()
@@ -181,7 +213,17 @@ class SimulatedTable:
         self.steps += 1
         self._balls.append((self.time, self.game.ball))
         self.drives.publish()
-        return outcome.goal, outcome.out_of_table
+        if self._viewer is not None:
+            self._viewer.show(*self.sim.scene())
+        if self._dead:
+            # Until the next serve the ball counts for nothing: one lying in a goal, which
+            # the real-time clock may step over several times before the loop serves, scores
+            # once.
+            return 0, False, False
+        self._dead = outcome.ended
+        if outcome.goal:
+            self._score[0 if outcome.goal == T.HOME_SCORED else 1] += 1
+        return outcome.goal, outcome.out_of_table, outcome.stagnated
 
     # ------------------------------------------------------------------ the loop's side
 
@@ -198,10 +240,25 @@ class SimulatedTable:
         (_, t), frame = self._camera.latest(after=(self._serves, self._served_at))
         return t, frame
 
+    def _keep_pace(self) -> None:
+        now = time.monotonic()
+        if self._paced_from is None:
+            self._paced_from = now - self.time
+        ahead = self._paced_from + self.time - now
+        if ahead > 0:
+            time.sleep(ahead)
+        else:
+            # Behind: the lost time is not made up by running fast afterwards.
+            self._paced_from = now - self.time
+
     def serve(self) -> None:
         """A new ball, as the task starts its episodes; the rods stay where they are."""
         with self._lock:
             self.game.serve(self.rng)
+            # What the clock reported of the old ball since the last step is no news of this one.
+            self._events.clear()
+            self._stagnated = self._dead = False
+            self._score = [0, 0]
             self._serves += 1
             self._served_at = self.time
             self._balls.append((self.time, self.game.ball))
@@ -216,10 +273,15 @@ class SimulatedTable:
         the last call.
 
         Returns:
-            ``(goal, out_of_table)``: goal +1 (home scored), -1 (away scored) or 0.
+            ``(goal, out_of_table)``: goal +1 (home scored), -1 (away scored) or 0. A ball
+            lying still too long ends the serve too: see :attr:`stagnated`.
         """
         if not self.realtime:
-            return self._tick()
+            goal, out, stagnated = self._tick()
+            self._stagnated |= stagnated
+            if self.pace:
+                self._keep_pace()
+            return goal, out
         if self._thread is None:
             self.start()
         with self._lock:
@@ -228,21 +290,61 @@ class SimulatedTable:
             if not self._ticked.wait_for(lambda: self.steps > steps, timeout=1.0):
                 raise RuntimeError("the simulated table's clock stopped")
             events, self._events = self._events, []
-        goal = next((g for g, _ in events if g), 0)
-        return goal, any(out for _, out in events)
+        self._stagnated |= any(stagnated for _, _, stagnated in events)
+        goal = next((g for g, _, _ in events if g), 0)
+        return goal, any(out for _, out, _ in events)
+
+    @property
+    def stagnated(self) -> bool:
+        """Whether the ball has lain still for the task's ``stagnation_steps`` since the last
+        serve, as of the last :meth:`step`: the serve is over, as an episode ends there."""
+        return self._stagnated
+
+    # ------------------------------------------------------------------ the GUI
+
+    @property
+    def window_open(self) -> bool:
+        """Whether the GUI window is there: opened with ``gui=True``, not closed since."""
+        return self._viewer is not None and self._viewer.open
+
+    def show_text(self, lines: list[str]) -> None:
+        """Write ``lines`` in the GUI window, the first above the table and the others below
+        it (nothing without the window)."""
+        if self._viewer is not None:
+            self._viewer.show_text(lines)
+
+    def keyboard_events(self) -> tuple[frozenset[str], frozenset[str]]:
+        """The keys held in the GUI window now and those pressed since the last call (see
+        :meth:`TableSim.keyboard_events`); none without the window."""
+        if self._viewer is None:
+            return frozenset(), frozenset()
+        return self._viewer.keyboard_events()
+
+    @property
+    def opponent(self) -> Any:
+        """The away side's policy (``None`` in a task without one)."""
+        return self.game.opponent
+
+    def set_opponent(self, policy: Any) -> None:
+        """Play the away side with ``policy``, a callable from the mirrored observation to
+        an action (see :meth:`Game.set_opponent`); it is asked once a control step."""
+        with self._lock:
+            self.game.set_opponent(policy)
 
     @property
     def success(self) -> bool:
         """Whether the task is met by the goals since the last serve."""
-        return self.game.success
+        return self.game.task.success(*self._score)
 
     @property
     def goals_for(self) -> int:
-        return self.game.goals_for
+        """Goals the home side scored since the last serve."""
+        return self._score[0]
 
     @property
     def goals_against(self) -> int:
-        return self.game.goals_against
+        """Goals the away side scored since the last serve."""
+        return self._score[1]
 
     def ball(self, at: float | None = None) -> tuple[float, float, float, float]:
         """The true ball x, y, vx, vy now, or at the table time ``at`` of a recent step."""
@@ -260,6 +362,8 @@ class SimulatedTable:
             self._thread.join(timeout=2)
         if self._camera is not None:
             self._camera.close()
+        if self._viewer is not None:
+            self._viewer.close()
         if hasattr(self, "drives"):
             self.drives.close()
         self.sim.close()
