@@ -69,7 +69,6 @@ def run(args: argparse.Namespace) -> int:
     from foosball_gym.training.league import (
         SCRIPTED,
         Player,
-        read_run,
         rising,
         run_league,
         run_players,
@@ -79,10 +78,6 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out or args.run)
     if args.out:
         check_directory("--out", out)
-    try:
-        read_run(args.run)
-    except ValueError as err:
-        raise CliError(str(err)) from None
     env_overrides = parse_env_kwargs(args.env_kwarg)
     try:
         players, config = run_players(args.run, args.generations, trust=args.trust_model)
