@@ -6,7 +6,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from foosball_gym.policies.scripted import ScriptedKeeper, crossing_y, fold_into_walls
+from foosball_gym import table as T
+from foosball_gym.policies.scripted import ScriptedKeeper, crossing_y
 
 
 def block_rate(policy, episodes: int) -> float:
@@ -38,12 +39,13 @@ def test_doing_nothing_blocks_far_fewer_shots():
 
 def test_wall_bounce_prediction():
     wall = 0.34 - 0.01725
-    assert fold_into_walls(0.1) == pytest.approx(0.1)
-    assert fold_into_walls(wall + 0.05) == pytest.approx(wall - 0.05)
-    assert fold_into_walls(-wall - 0.05) == pytest.approx(-wall + 0.05)
-    assert fold_into_walls(3 * wall + 0.01) == pytest.approx(-wall + 0.01)
-    # From (0.3, 0) at 45 degrees towards -x and +y: hits the wall and comes back.
-    assert crossing_y(0.3, 0.0, -1.0, 1.0, -0.522) == pytest.approx(2 * wall - 0.822)
+    assert crossing_y(0.3, 0.1, -2.0, 0.2, -0.522) == pytest.approx(0.1 + 0.1 * 0.822)
+    # From (0.3, 0) at 45 degrees towards -x and +y: meets the wall, and comes back along a
+    # path flattened as the simulated wall flattens it (0.595 at 45 degrees).
+    ratio = T.wall_bounce_slope_ratio(1.0)
+    assert ratio == pytest.approx(0.595)
+    assert crossing_y(0.3, 0.0, -1.0, 1.0, -0.522) == pytest.approx(wall - ratio * (0.822 - wall))
+    assert crossing_y(0.3, 0.0, -1.0, -1.0, -0.522) == pytest.approx(-wall + ratio * (0.822 - wall))
     assert crossing_y(0.3, 0.0, 1.0, 0.0, -0.522) is None
 
 

@@ -39,7 +39,8 @@ class ScoreEnv(FoosballEnv):
 
     ## Starting State
     ``ball_start="resting"``: the ball lies still at x = -0.497 ± 0.005, y ~ U(-0.1, 0.1).
-    ``"incoming"``: as Block, shot at the home goal at ``speed_range`` ~ U(3, 7) m/s. The keeper
+    ``"incoming"``: as Block, shot at the home goal at ``speed_range`` ~ U(3, 7) m/s, from
+    ``serve_x_range`` and ``serve_y_range``, a share ``bank_share`` off a side wall. The keeper
     starts centred, or just beside the ball if centred would put the figurine inside it.
     Reset options: ``ball_position``, ``ball_velocity`` and, with obstacles,
     ``obstacle_positions`` (the three prismatic values, in the order above).
@@ -49,12 +50,14 @@ class ScoreEnv(FoosballEnv):
     steps. ``info["is_success"]``: a goal was scored.
 
     ## Arguments
-    ``ball_start``, ``obstacles``, ``speed_range`` and every keyword of :class:`FoosballEnv`.
+    ``ball_start``, ``obstacles``, ``speed_range``, ``serve_x_range``, ``serve_y_range``,
+    ``bank_share`` (see ``Foosball-Block-v0``; they shape incoming balls only) and every keyword of :class:`FoosballEnv`.
 
     ## Version History
     - v0: first version.
     - v0, physics revision 2: the faithful table (README, "The simulated table");
       ``control_hz`` replaces ``substeps``.
+    - v0: ``serve_x_range``, ``serve_y_range`` and ``bank_share``, as Block's.
     """
 
     task_class = ScoreTask

@@ -31,20 +31,22 @@ VOLLEY_WINDOW = 0.25
 VOLLEY_MIN_SPEED = 1.0  # slower balls are stopped first, then kicked
 
 
-def fold_into_walls(y: float, half_width: float = _WALL) -> float:
-    """Where a straight path that reached ``y`` really is after bouncing off the side walls."""
-    period = 4 * half_width
-    y = (y + half_width) % period
-    return (y if y <= 2 * half_width else period - y) - half_width
-
-
 def crossing_y(x: float, y: float, vx: float, vy: float, line_x: float) -> float | None:
-    """Where a ball moving at (vx, vy) crosses x = line_x, with side-wall bounces; None if it
-    is moving away from that line."""
+    """Where a ball moving at (vx, vy) crosses x = line_x, with side-wall bounces that flatten
+    its path as the simulated walls do; None if it is moving away from that line."""
     dx = line_x - x
     if vx == 0 or dx / vx < 0:
         return None
-    return fold_into_walls(y + vy * dx / vx)
+    run, slope = abs(dx), vy / abs(vx)
+    y = min(max(y, -_WALL), _WALL)
+    for _ in range(8):
+        reach = y + slope * run
+        if abs(reach) <= _WALL:
+            return reach
+        wall = math.copysign(_WALL, slope)
+        run -= (wall - y) / slope
+        y, slope = wall, -slope * T.wall_bounce_slope_ratio(slope)
+    return y
 
 
 def _find(names: Sequence[str], name: str) -> int:

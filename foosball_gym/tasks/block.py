@@ -9,19 +9,21 @@ import numpy as np
 from foosball_gym import table as T
 from foosball_gym.interface.task import Layout
 from foosball_gym.tasks.base import Start, Task
-from foosball_gym.tasks.serves import (
-    SHOT_SPEED_LIMITS,
-    check_range,
-    random_shot_start,
-    shot_at_goal,
-)
+from foosball_gym.tasks.serves import Shots
 
 
 class BlockTask(Task):
     """Shots from the away half at the home goal; success is conceding none."""
 
-    def __init__(self, *, speed_range: tuple[float, float] = (2.0, 7.0)) -> None:
-        self.speed_range = check_range("speed_range", speed_range, *SHOT_SPEED_LIMITS)
+    def __init__(
+        self,
+        *,
+        speed_range: tuple[float, float] = (2.0, 7.0),
+        serve_x_range: tuple[float, float] = (0.0, 0.4),
+        serve_y_range: tuple[float, float] = (-0.3, 0.3),
+        bank_share: float = 0.0,
+    ) -> None:
+        self.shots = Shots.checked(speed_range, serve_x_range, serve_y_range, bank_share)
         self.layout = Layout(controlled=("home_keeper",), joints="slide")
 
     def sample_start(
@@ -31,10 +33,10 @@ class BlockTask(Task):
         ball_velocity=None,
         options: dict[str, Any] | None = None,
     ) -> Start:
-        position, velocity = random_shot_start(rng, self.speed_range)
+        position, velocity = self.shots.start(rng)
         if ball_position is not None:
             position = ball_position
-            velocity = shot_at_goal(rng, position, self.speed_range, T.HOME)
+            velocity = self.shots.aim(rng, position, T.HOME)
         if ball_velocity is not None:
             velocity = ball_velocity
         return Start([0.0], [0.0], position, velocity)

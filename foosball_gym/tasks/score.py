@@ -12,14 +12,7 @@ from foosball_gym.interface.observations import check_flag
 from foosball_gym.interface.task import Layout
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.tasks.base import Start, Task
-from foosball_gym.tasks.serves import (
-    SHOT_SPEED_LIMITS,
-    check_choice,
-    check_range,
-    random_shot_start,
-    resting_in_front_of,
-    shot_at_goal,
-)
+from foosball_gym.tasks.serves import Shots, check_choice, resting_in_front_of
 
 BALL_STARTS = ("resting", "incoming")
 OBSTACLES = ("away_keeper", "away_defense", "away_offense")
@@ -39,10 +32,13 @@ class ScoreTask(Task):
         ball_start: str = "resting",
         obstacles: bool = False,
         speed_range: tuple[float, float] = (3.0, 7.0),
+        serve_x_range: tuple[float, float] = (0.0, 0.4),
+        serve_y_range: tuple[float, float] = (-0.3, 0.3),
+        bank_share: float = 0.0,
     ) -> None:
         self.ball_start = check_choice("ball_start", ball_start, BALL_STARTS)
         self.obstacles = check_flag("obstacles", obstacles)
-        self.speed_range = check_range("speed_range", speed_range, *SHOT_SPEED_LIMITS)
+        self.shots = Shots.checked(speed_range, serve_x_range, serve_y_range, bank_share)
         self.extras = OBSTACLES if self.obstacles else ()
         self.layout = Layout(controlled=("home_keeper",), joints="both", static=self.extras)
 
@@ -57,11 +53,11 @@ class ScoreTask(Task):
         if self.ball_start == "resting":
             position, velocity = resting_in_front_of(rng, T.HOME), (0.0, 0.0)
         else:
-            position, velocity = random_shot_start(rng, self.speed_range)
+            position, velocity = self.shots.start(rng)
         if ball_position is not None:
             position = ball_position
             if self.ball_start == "incoming":
-                velocity = shot_at_goal(rng, position, self.speed_range, T.HOME)
+                velocity = self.shots.aim(rng, position, T.HOME)
         if ball_velocity is not None:
             velocity = ball_velocity
         slide = [0.0]
