@@ -152,6 +152,7 @@ def wall_bounce_slope_ratio(slope: float) -> float:
     degrees = math.degrees(math.atan(abs(slope)))
     return float(np.interp(degrees, WALL_BOUNCE_ANGLES, WALL_BOUNCE_SLOPE_RATIOS))
 
+
 # What a simulation step reports about goals (seen from the home side).
 NO_GOAL = 0
 HOME_SCORED = 1  # the ball crossed the away goal line (x > 0)

@@ -54,7 +54,8 @@ class BlockEnv(FoosballEnv):
 
     ## Arguments
     ``speed_range`` (m/s, at most 30), ``serve_x_range`` (m, within [-0.1, 0.5825]),
-    ``serve_y_range`` (m, within ±0.32275), ``bank_share`` (in [0, 1]), and every keyword of :class:`FoosballEnv` (reward weights,
+    ``serve_y_range`` (m, within ±0.32275), ``bank_share`` (in [0, 1]), and every keyword
+    of :class:`FoosballEnv` (reward weights,
     ``shaping``, ``gamma``, ``joint_velocities``, ``observe_figurines``, ``render_mode``,
     ``render_width``, ``render_height``, and the physics options ``physics_hz``,
     ``control_hz``, ``contact_travel``, ``rolling_resistance``).

@@ -51,7 +51,8 @@ class ScoreEnv(FoosballEnv):
 
     ## Arguments
     ``ball_start``, ``obstacles``, ``speed_range``, ``serve_x_range``, ``serve_y_range``,
-    ``bank_share`` (see ``Foosball-Block-v0``; they shape incoming balls only) and every keyword of :class:`FoosballEnv`.
+    ``bank_share`` (see ``Foosball-Block-v0``; they shape incoming balls only) and every
+    keyword of :class:`FoosballEnv`.
 
     ## Version History
     - v0: first version.
