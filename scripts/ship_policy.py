@@ -22,6 +22,9 @@ def main() -> None:
     parser.add_argument("run", type=Path)
     parser.add_argument("name")
     parser.add_argument("--command", required=True, help="the command that trained the run")
+    parser.add_argument(
+        "--note", default="", help="what else to know: wall time, machine, measured results"
+    )
     args = parser.parse_args()
     target = BUILTIN / args.name
     target.mkdir(parents=True, exist_ok=True)
@@ -34,7 +37,8 @@ def main() -> None:
         f"Trained on `{config['env_id']}` with seed {config['seed']}:\n\n"
         f"```bash\n{args.command}\n```\n\n"
         f"`config.json` is the resolved configuration of that run, `eval.csv` and `eval.png` its "
-        f"evaluation curve (50 seeded episodes per point).\n"
+        f"evaluation curve ({config.get('eval_episodes', 50)} seeded episodes per point).\n"
+        + (f"\n{args.note.strip()}\n" if args.note.strip() else "")
     )
     print(f"shipped {args.run} as builtin:{args.name} in {target}")
 

@@ -88,3 +88,12 @@ def test_load_policy_is_offered_by_the_package_itself():
         action.astype(np.float32)
     )
     env.close()
+
+
+def test_block_keeps_the_direct_shots_it_was_not_trained_only_on():
+    # builtin:block was trained on the wide distribution (banks, 2-10 m/s); the default serve,
+    # direct shots at 2-7 m/s, must stay blocked too, on the default observation.
+    loaded = load_policy("builtin:block")
+    assert loaded.env_kwargs.get("bank_share") == 0.5
+    trained = evaluate(loaded.policy, "Foosball-Block-v0", {}, EPISODES, seed=7000)
+    assert trained.success_rate >= 0.98, trained
