@@ -54,10 +54,23 @@ def test_net_score_rule_counts_losses_against_wins():
     assert [(n, score) for n, score, _ in fired] == [(100, 0.25)]
 
 
+def test_winning_rule_asks_for_the_win_rate_and_a_lead():
+    # 30 % wins but as many losses: the paper's rule replaces, the winning rule waits.
+    level = [WIN] * 30 + [LOSS] * 30 + [DRAW] * 40
+    assert [n for n, *_ in play(ReplacementRule("win_rate", 0.2, window=100), level)] == [100]
+    assert play(ReplacementRule("winning", 0.2, window=100), level) == []
+    ahead = [WIN] * 25 + [LOSS] * 24 + [DRAW] * 51
+    fired = play(ReplacementRule("winning", 0.2, window=100), ahead)
+    assert [(n, score) for n, score, _ in fired] == [(100, 0.25)]
+    # A lead without the win rate is not enough either.
+    assert play(ReplacementRule("winning", 0.2, window=100), [WIN] * 10 + [DRAW] * 90) == []
+
+
 @pytest.mark.parametrize(
     "rule, threshold",
     [
         ("win_rate", 0.0),
+        ("winning", 0.0),
         ("win_rate", 1.5),
         ("win_rate", math.nan),
         ("net_score", 1.0),

@@ -125,8 +125,8 @@ class TrainConfig:
     selfplay_rule: str = _field(
         "win_rate",
         "when self-play replaces its opponent: win_rate (the paper's: the learner wins at "
-        "least the threshold of the window's games) or net_score ((wins - losses) / games "
-        "above it)",
+        "least the threshold of the window's games), net_score ((wins - losses) / games "
+        "above it) or winning (the win rate, and more wins than losses)",
     )
     selfplay_window: int = _field(100, "games the self-play rule judges")
     selfplay_threshold: float = _field(0.2, "the self-play rule's threshold")

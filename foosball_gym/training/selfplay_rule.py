@@ -6,7 +6,10 @@ Needs neither PyTorch nor either learning library.
 The paper's rule is the default: a snapshot of the learner becomes the opponent once it wins
 at least ``threshold`` (20 %) of the last ``window`` games. The older net-score rule,
 (wins - losses) / games above ``threshold``, is kept as an option; it cannot fire when most
-games are drawn, which is what two good keepers mostly play.
+games are drawn, which is what two good keepers mostly play. The ``winning`` rule asks for
+both a win rate of ``threshold`` and more wins than losses: under the paper's rule alone a
+learner that loses as often as it wins still replaces its opponent, and generations churn
+without getting stronger (measured: 47 generations within about 70 Elo of the first).
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-SELFPLAY_RULES = ("win_rate", "net_score")
+SELFPLAY_RULES = ("win_rate", "net_score", "winning")
 
 
 def check_rule(rule: str, threshold: float) -> None:
@@ -25,7 +28,7 @@ def check_rule(rule: str, threshold: float) -> None:
     if rule not in SELFPLAY_RULES:
         raise ValueError(f"unknown self-play rule {rule!r}; allowed: {', '.join(SELFPLAY_RULES)}")
     # Written `not a < x <= b`, so that NaN fails too.
-    if rule == "win_rate" and not 0 < threshold <= 1:
+    if rule in ("win_rate", "winning") and not 0 < threshold <= 1:
         raise ValueError(f"the win_rate rule's threshold must lie in (0, 1], got {threshold}")
     if rule == "net_score" and not -1 <= threshold < 1:
         raise ValueError(f"the net_score rule's threshold must lie in [-1, 1), got {threshold}")
@@ -47,8 +50,9 @@ class ReplacementRule:
     """Counts finished games (+1 won, 0 drawn, -1 lost) and says when the opponent is beaten.
 
     Args:
-        rule: ``"win_rate"`` (wins / games at least ``threshold``) or ``"net_score"``
-            ((wins - losses) / games above ``threshold``).
+        rule: ``"win_rate"`` (wins / games at least ``threshold``), ``"net_score"``
+            ((wins - losses) / games above ``threshold``) or ``"winning"`` (wins / games at
+            least ``threshold`` and more wins than losses).
         threshold: see ``rule``.
         window: the last this many games are judged; none is judged before the window is full.
 
@@ -72,7 +76,7 @@ class ReplacementRule:
     def score(self) -> float:
         """The rule's measure over the games in the window."""
         res = np.array(self.results)
-        if self.rule == "win_rate":
+        if self.rule in ("win_rate", "winning"):
             return float((res > 0).mean())
         return float(res.mean())
 
@@ -94,7 +98,12 @@ class ReplacementRule:
         if len(self.results) < self.window:
             return None
         score = self.score()
-        due = score >= self.threshold if self.rule == "win_rate" else score > self.threshold
+        if self.rule == "win_rate":
+            due = score >= self.threshold
+        elif self.rule == "winning":
+            due = score >= self.threshold and sum(self.results) > 0
+        else:
+            due = score > self.threshold
         if not due:
             return None
         elo = self.elo()
