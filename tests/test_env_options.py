@@ -135,6 +135,8 @@ def test_figurine_observation_follows_the_rod(make_env):
         ("Foosball-FullGame-v0", {"continuous": 1}, "True or False"),
         ("Foosball-KeeperVsKeeper-v0", {"stagnation_steps": -1}, "non-negative"),
         ("Foosball-KeeperVsKeeper-v0", {"opponent": "scripted"}, "callable"),
+        ("Foosball-Score-v0", {"residual": -0.1}, r"residual must be a number in \[0, 2.0\]"),
+        ("Foosball-Block-v0", {"residual": "much"}, "residual must be a number"),
     ],
 )
 def test_invalid_arguments_say_what_is_allowed(env_id, kwargs, message):
@@ -149,3 +151,36 @@ def test_bad_obstacle_positions_are_rejected(make_env):
     plain = make_env("Foosball-Score-v0")
     with pytest.raises(ValueError, match="obstacles=True"):
         plain.reset(options={"obstacle_positions": (0.0, 0.0, 0.0)})
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_a_residual_policy_that_does_nothing_plays_the_scripted_baseline(env_id):
+    """With ``residual``, action 0 is the baseline's move and a correction shifts it."""
+    import numpy as np
+
+    plain = gym.make(env_id)
+    residual = gym.make(env_id, residual=0.2)
+    baseline = plain.unwrapped.scripted_policy()
+    n = residual.action_space.shape
+    try:
+        gym_check_env(residual.unwrapped, skip_render_check=True)
+        obs_a, _ = plain.reset(seed=3)
+        obs_b, _ = residual.reset(seed=3)
+        for _ in range(60):
+            obs_a, ra, ta, _, _ = plain.step(baseline(obs_a))
+            obs_b, rb, tb, _, _ = residual.step(np.zeros(n, dtype=np.float32))
+            np.testing.assert_array_equal(obs_a, obs_b)
+            assert (ra, ta) == (rb, tb)
+            if ta:
+                break
+        # A full correction moves the keeper where the baseline would not have.
+        ends = []
+        for sign in (1.0, -1.0):
+            residual.reset(seed=3)
+            for _ in range(10):
+                obs, *_ = residual.step(np.full(n, sign, dtype=np.float32))
+            ends.append(obs[0])
+        assert abs(ends[0] - ends[1]) > 0.01
+    finally:
+        plain.close()
+        residual.close()

@@ -9,6 +9,7 @@ actions, observations, reward terms, info, rendering, seeding and domain randomi
 from __future__ import annotations
 
 import inspect
+import math
 import time
 from typing import Any, ClassVar
 
@@ -29,6 +30,22 @@ from foosball_gym.tasks.registry import interface_of
 from foosball_gym.tasks.serves import check_range
 
 RENDER_MODES = ("human", "rgb_array")
+
+
+RESIDUAL_LIMIT = 2.0
+
+
+def check_residual(value: Any) -> float:
+    """The residual scale: 0 (off) up to RESIDUAL_LIMIT, or a ValueError saying so."""
+    try:
+        scale = float(value)
+    except (TypeError, ValueError):
+        scale = math.nan
+    if isinstance(value, bool) or not 0.0 <= scale <= RESIDUAL_LIMIT:
+        raise ValueError(
+            f"residual must be a number in [0, {RESIDUAL_LIMIT}] (0: off), got {value!r}"
+        )
+    return scale
 
 
 class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -67,6 +84,12 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         camera_noise: the simulated camera's errors, keys of
             :class:`~foosball_gym.envs.estimated.CameraNoise` (fps, position_std, rod_std,
             drop_rate, hide_under_figurines, latency_s).
+
+    Residual learning (off by default):
+        residual: where above 0, the action is a correction to the task's scripted baseline:
+            the rods are sent ``clip(scripted(obs) + residual * action, -1, 1)``, ``obs`` being
+            the observation the action answers. An untrained policy (actions near 0) plays
+            like the baseline; learning improves on it instead of re-learning it. At most 2.
 
     Other:
         opponent: the away side's policy, a callable from the mirrored observation to an
@@ -146,6 +169,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         rolling_resistance_range: tuple[float, float] | None = None,
         estimated_state: bool = False,
         camera_noise: dict[str, Any] | None = None,
+        residual: float = 0.0,
         render_mode: str | None = None,
         render_width: int = 320,
         render_height: int = 180,
@@ -224,6 +248,10 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise ValueError("camera_noise needs estimated_state=True")
         self._n_act = self.interface.n_actions
         self.action_space = spaces.Box(-1.0, 1.0, shape=(self._n_act,), dtype=np.float32)
+        self.residual = check_residual(residual)
+        # Residual RL: the action corrects the scripted baseline, which sees what the agent saw.
+        self._baseline = self.scripted_policy() if self.residual else None
+        self._last_obs: np.ndarray | None = None
         self._rewards = RewardComputer(self.weights, [T.rod(r) for r in layout.controlled])
         self.dt = 1.0 / control_hz
 
@@ -299,7 +327,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             self._estimated.rng = self.np_random
         self._start(self.task.sample_start(self.np_random, ball_position, ball_velocity, options))
         self._started = True
-        obs = self._observe()
+        obs = self._last_obs = self._observe()
         info = {"goal": 0, "is_success": self.game.success, **self._score_info()}
         if dynamics:
             info["dynamics"] = dynamics
@@ -345,6 +373,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         if not self._started:
             raise gym.error.ResetNeeded("call reset() before step()")
         act = check_action(action, self._n_act, "action")
+        if self._baseline is not None:
+            base = np.asarray(self._baseline(self._last_obs), dtype=np.float64)
+            act = [float(a) for a in np.clip(base + self.residual * np.asarray(act), -1.0, 1.0)]
         game = self.game
         game.command(act)
         outcome = game.advance()
@@ -375,7 +406,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             goals = game.goals_for, game.goals_against
             self._start(self.task.sample_start(self.np_random))
             game.goals_for, game.goals_against = goals
-        obs = self._observe()
+        obs = self._last_obs = self._observe()
         if self.render_mode == "human":
             self.render()
         return obs, float(sum(terms.values())), outcome.ended and not continuous, False, info

@@ -485,6 +485,7 @@ def train(
         venv.close()
         raise
     if not continuing and config.pretrain_episodes:
+        pretrain_start = time.perf_counter()
         demos = collect(
             config.env_id,
             config.env_kwargs,
@@ -498,6 +499,7 @@ def train(
             "samples": len(demos.actions),
             "scripted_success_rate": demos.success_rate,
             **fit,
+            "seconds": round(time.perf_counter() - pretrain_start, 2),
         }
         atomic_write_text(out / "pretrain.json", json.dumps(record, indent=2))
 
