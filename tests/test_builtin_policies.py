@@ -25,13 +25,18 @@ from foosball_gym.training.models import (  # noqa: E402
 )
 
 EPISODES = 100
-# Measured over 500 seeded episodes each shipped policy beats its baseline (README); on 100 it
-# may trail by a shot or two, which is not what this test is for: it catches a broken policy.
+# Measured over 500 seeded episodes each shipped policy does at least as well as its baseline
+# (README); on 100 it may trail by a shot or two, which is not what this test is for: it catches
+# a broken policy.
 MARGIN = 0.02
 
 
+# What each shipped policy must keep on EPISODES seeded episodes (500 measured: README).
+FLOORS = {"block": 0.98, "score-resting": 0.95, "score-obstacles": 0.6}
+
+
 def test_the_promised_policies_are_shipped():
-    assert {"block", "score-resting"} <= set(builtin_names())
+    assert {"block", "score-resting", "score-obstacles"} <= set(builtin_names())
 
 
 def _revision(name: str) -> int:
@@ -64,7 +69,7 @@ def test_a_shipped_policy_does_at_least_as_well_as_the_scripted_baseline(name):
     else:
         baseline = evaluate(scripted, loaded.env_id, loaded.env_kwargs, EPISODES, seed=7000)
         assert trained.success_rate >= baseline.success_rate - MARGIN, (trained, baseline)
-        assert trained.success_rate >= 0.9
+        assert trained.success_rate >= FLOORS.get(name, 0.9)
 
 
 def test_cli_evaluates_a_builtin_policy_by_name(tmp_path, capsys):
