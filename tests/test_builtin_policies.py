@@ -102,3 +102,20 @@ def test_block_keeps_the_direct_shots_it_was_not_trained_only_on():
     assert loaded.env_kwargs.get("bank_share") == 0.5
     trained = evaluate(loaded.policy, "Foosball-Block-v0", {}, EPISODES, seed=7000)
     assert trained.success_rate >= 0.98, trained
+
+
+def test_a_residual_policy_gives_the_whole_action_wherever_it_plays():
+    # builtin:score-obstacles learned a correction to the scripted keeper. Loaded, it must act
+    # alone (a real table has no scripted keeper to add to it): on an environment without the
+    # residual option it plays exactly what its raw correction plays on one with it.
+    loaded = load_policy("builtin:score-obstacles")
+    assert loaded.trained_residual == 0.1 and "residual" not in loaded.env_kwargs
+    whole = evaluate(loaded, loaded.env_id, loaded.env_kwargs, 20, seed=300)
+    raw = evaluate(
+        loaded.policy, loaded.env_id, {**loaded.env_kwargs, "residual": 0.1}, 20, seed=300
+    )
+    assert (whole.goals_for, whole.goals_against, whole.mean_length) == (
+        raw.goals_for,
+        raw.goals_against,
+        raw.mean_length,
+    )

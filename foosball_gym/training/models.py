@@ -37,15 +37,35 @@ class ModelLoadError(ValueError):
 @dataclass
 class LoadedPolicy:
     """A trained policy with the environment it was trained on; call it with an observation
-    to get the action (its normalisation applied)."""
+    to get the action (its normalisation applied).
+
+    A model trained with the environment option ``residual`` learned a correction to the
+    task's scripted baseline: calling it gives the whole action, baseline and correction, so
+    that it plays wherever an action is expected (``foosball play`` on a real table included).
+    Its ``env_kwargs`` then leave ``residual`` out (``trained_residual`` keeps the scale):
+    an environment made with them takes the whole action.
+    """
 
     policy: PolicySnapshot
     env_id: str | None
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     source: str = ""
+    trained_residual: float = 0.0
+    baseline: Any = None
 
     def __call__(self, obs: Any) -> np.ndarray:
-        return self.policy(obs)
+        action = self.policy(obs)
+        if self.baseline is None:
+            return action
+        # In double precision, as the environment's residual option adds them: a corner kick
+        # turns a rounding difference into another shot.
+        obs = np.asarray(obs)
+        if obs.ndim == 1:
+            base = np.asarray(self.baseline(obs), dtype=np.float64)
+        else:
+            base = np.stack([np.asarray(self.baseline(o), dtype=np.float64) for o in obs])
+        correction = self.trained_residual * np.asarray(action, dtype=np.float64)
+        return np.clip(base + correction, -1.0, 1.0)
 
     def check_env(self, env_id: str, env_kwargs: dict[str, Any] | None = None) -> None:
         """Raise ValueError where the environment's observations do not fit the policy."""
@@ -164,11 +184,20 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     mismatch = physics_mismatch(config, f"the model {text}")
     if mismatch:
         warnings.warn(mismatch, PhysicsMismatchWarning, stacklevel=2)
+    env_kwargs = dict((config or {}).get("env_kwargs", {}))
+    residual = float(env_kwargs.pop("residual", 0.0) or 0.0)
+    baseline = None
+    if residual and env_id is not None:
+        from foosball_gym.catalog import scripted_policy
+
+        baseline = scripted_policy(env_id, env_kwargs)
     return LoadedPolicy(
         policy=snapshot,
         env_id=env_id,
-        env_kwargs=dict((config or {}).get("env_kwargs", {})),
+        env_kwargs=env_kwargs,
         source=str(path),
+        trained_residual=residual,
+        baseline=baseline,
     )
 
 
