@@ -116,13 +116,13 @@ def run(args: argparse.Namespace) -> int:
                 f"{args.target} has no config.json naming its environment; give --env ENV_ID"
             )
         env_kwargs = {**loaded.env_kwargs, **env_kwargs}
-        policy, name = loaded.policy, loaded.source
+        policy, name = loaded, loaded.source
     opponent, opponent_name = None, None
     if args.opponent:
         if args.opponent == "scripted":
             opponent_name = "scripted"
         else:
-            opponent = load_model(args.opponent, args.trust_model).policy
+            opponent = load_model(args.opponent, args.trust_model)
             opponent_name = args.opponent
     try:
         result = evaluate(

@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(err)) from None
     for spec in args.add:
         loaded = load_model(spec, args.trust_model)
-        players.append(Player(spec, loaded.policy))
+        players.append(Player(spec, loaded))
     if not args.no_scripted:
         players.append(Player(SCRIPTED, None))
     env_kwargs = {**config.get("env_kwargs", {}), **env_overrides}

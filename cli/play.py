@@ -133,7 +133,7 @@ def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
         raise CliError(f"{args.model} does not say its environment; give --env ENV_ID")
     env_kwargs = {**loaded.env_kwargs, **env_kwargs}
     check_model_fits(loaded, env_id, env_kwargs)
-    return loaded.policy, env_id, env_kwargs
+    return loaded, env_id, env_kwargs
 
 
 def _check_human(env_id: str, env_kwargs: dict[str, Any], human: str, rod: str | None) -> None:

@@ -53,6 +53,11 @@ class LoadedPolicy:
     trained_residual: float = 0.0
     baseline: Any = None
 
+    @property
+    def observation_size(self) -> int:
+        """The size of the observations it takes."""
+        return self.policy.observation_size
+
     def __call__(self, obs: Any) -> np.ndarray:
         action = self.policy(obs)
         if self.baseline is None:
