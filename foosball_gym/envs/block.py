@@ -53,7 +53,7 @@ class BlockEnv(FoosballEnv):
     so far. ``info["goal"]``: +1 scored, -1 conceded, 0 none.
 
     ## Arguments
-    ``speed_range`` (m/s, at most 30), ``serve_x_range`` (m, within [-0.1, 0.5825]),
+    ``speed_range`` (m/s, at most 30), ``serve_x_range`` (m, within [-0.1, 0.48275]),
     ``serve_y_range`` (m, within ±0.32275), ``bank_share`` (in [0, 1]), and every keyword
     of :class:`FoosballEnv` (reward weights,
     ``shaping``, ``gamma``, ``joint_velocities``, ``observe_figurines``, ``render_mode``,

@@ -86,9 +86,10 @@ class Shots:
 
     Positions are in the frame of a defender at the home goal (x = -0.617): ``x_range`` and
     ``y_range`` bound a uniform start, ``speed_range`` a uniform speed. A share ``bank_share``
-    of the shots is aimed off a side wall (either, at random) at a uniform point of the goal
-    mouth; the others go straight at it. With ``bank_share == 0`` the draws are those of the
-    plain shot, so seeded serves stay what they were before banks existed.
+    of the shots is aimed off a side wall (either, at random) at a uniform point of the middle
+    of the goal mouth; the others go straight at a uniform point of all of it. With
+    ``bank_share == 0`` the draws are those of the plain shot, so seeded serves stay what they
+    were before banks existed.
     """
 
     speed_range: tuple[float, float] = (2.0, 7.0)
@@ -134,7 +135,7 @@ class Shots:
         x, y = flip * position[0], flip * position[1]
         slope = bank_slope(x, y, target_y - side * BANK_AIM_OFFSET, side)
         if slope is None:
-            side = -side  # the far wall needs too steep a shot: bank off the near one
+            side = -side  # that wall needs too steep a shot: bank off the other
             slope = bank_slope(x, y, target_y - side * BANK_AIM_OFFSET, side)
         if slope is None:
             return shot_at_goal(rng, position, self.speed_range, defender)
