@@ -22,7 +22,7 @@ from foosball_gym.envs.estimated import CameraNoise, EstimatedState
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
 from foosball_gym.game import Game, Policy
 from foosball_gym.interface.observations import JOINT_SETS, check_flag
-from foosball_gym.interface.task import TaskInterface, check_action
+from foosball_gym.interface.task import TaskInterface, check_action, residual_action
 from foosball_gym.physics_options import check_physics
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.tasks.base import Task, check_ball_position, check_pair, split_options
@@ -374,8 +374,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise gym.error.ResetNeeded("call reset() before step()")
         act = check_action(action, self._n_act, "action")
         if self._baseline is not None:
-            base = np.asarray(self._baseline(self._last_obs), dtype=np.float64)
-            act = [float(a) for a in np.clip(base + self.residual * np.asarray(act), -1.0, 1.0)]
+            base = self._baseline(self._last_obs)
+            act = [float(a) for a in residual_action(base, self.residual, act)]
         game = self.game
         game.command(act)
         outcome = game.advance()

@@ -58,6 +58,15 @@ def action_joints(
     return tuple(driven), tuple(scales), tuple(held)
 
 
+def residual_action(baseline: Any, scale: float, correction: Any) -> np.ndarray:
+    """The action a residual policy sends: its baseline's action plus ``scale`` times its
+    correction, clipped to [-1, 1]. In double precision wherever it is made (the environment's
+    ``residual`` option, a loaded residual model): a corner kick turns a rounding difference
+    into another shot."""
+    base = np.asarray(baseline, dtype=np.float64)
+    return np.clip(base + scale * np.asarray(correction, dtype=np.float64), -1.0, 1.0)
+
+
 def check_action(action: Any, n: int, what: str = "action") -> list[float]:
     """``action`` as ``n`` floats clipped to [-1, 1], or a ValueError saying what is wrong."""
     try:

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from foosball_gym.interface.task import residual_action
 from foosball_gym.training.config import PhysicsMismatchWarning, physics_mismatch
 from foosball_gym.training.files import CONFIG_FILE, LEGACY_NORM_FILE, MODEL_FILE, NORM_FILE
 from foosball_gym.training.snapshot import PolicySnapshot, policy_from_state_dict
@@ -62,15 +63,9 @@ class LoadedPolicy:
         action = self.policy(obs)
         if self.baseline is None:
             return action
-        # In double precision, as the environment's residual option adds them: a corner kick
-        # turns a rounding difference into another shot.
         obs = np.asarray(obs)
-        if obs.ndim == 1:
-            base = np.asarray(self.baseline(obs), dtype=np.float64)
-        else:
-            base = np.stack([np.asarray(self.baseline(o), dtype=np.float64) for o in obs])
-        correction = self.trained_residual * np.asarray(action, dtype=np.float64)
-        return np.clip(base + correction, -1.0, 1.0)
+        base = self.baseline(obs) if obs.ndim == 1 else [self.baseline(o) for o in obs]
+        return residual_action(base, self.trained_residual, action)
 
     def check_env(self, env_id: str, env_kwargs: dict[str, Any] | None = None) -> None:
         """Raise ValueError where the environment's observations do not fit the policy."""

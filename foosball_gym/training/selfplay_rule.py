@@ -29,7 +29,7 @@ def check_rule(rule: str, threshold: float) -> None:
         raise ValueError(f"unknown self-play rule {rule!r}; allowed: {', '.join(SELFPLAY_RULES)}")
     # Written `not a < x <= b`, so that NaN fails too.
     if rule in ("win_rate", "winning") and not 0 < threshold <= 1:
-        raise ValueError(f"the win_rate rule's threshold must lie in (0, 1], got {threshold}")
+        raise ValueError(f"the {rule} rule's threshold must lie in (0, 1], got {threshold}")
     if rule == "net_score" and not -1 <= threshold < 1:
         raise ValueError(f"the net_score rule's threshold must lie in [-1, 1), got {threshold}")
 
