@@ -394,7 +394,7 @@ def test_the_window_writes_the_score_above_the_table(display):
     from Xlib import X
     from Xlib.display import Display
 
-    from foosball_gym.simulator import TableSim
+    from foosball_gym.sim_table.viewer_process import ViewerProcess
 
     def dark_pixels(window) -> int:
         """Near-black pixels in the part of ``window`` on the screen."""
@@ -408,7 +408,9 @@ def test_the_window_writes_the_score_above_the_table(display):
         pixels = np.frombuffer(shot.data, np.uint8).reshape(y1 - y0, x1 - x0, 4)
         return int((pixels[:, :, :3].max(axis=2) < 60).sum())
 
-    sim = TableSim(["home_keeper", "away_keeper"], gui=True)
+    # The window in a process of its own, as `foosball play --gui` opens it: a PyBullet GUI
+    # connected in the test's own process, after other windows, once hung there for good.
+    sim = ViewerProcess(["home_keeper", "away_keeper"])
     connection = Display(display)
     try:
         window = find_window(connection.screen().root)
