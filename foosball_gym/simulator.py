@@ -26,6 +26,7 @@ nothing to simulate.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import ctypes
 import functools
@@ -208,6 +209,17 @@ def _rod_spin_inertia(rod: T.Rod) -> float:
     return T.ROD_MASS * T.ROD_RADIUS**2 / 2 + len(rod.figurine_offsets) * figurine
 
 
+def drive_acceleration(rod: T.Rod, joint: str) -> float:
+    """The most a drive can change its joint's speed per second, with nothing else pushing
+    (m/s^2 for ``"slide"``, rad/s^2 for ``"spin"``)."""
+    if joint == "slide":
+        moving = T.CARRIAGE_MASS + T.ROD_MASS + len(rod.figurine_offsets) * T.FIGURINE_MASS
+        return T.SLIDE_MAX_FORCE / moving
+    if joint == "spin":
+        return T.SPIN_MAX_TORQUE / _rod_spin_inertia(rod)
+    raise ValueError(f"joint must be 'slide' or 'spin', got {joint!r}")
+
+
 # Where a figurine can be, in the plane across its rod (distances from the rod's axis): the
 # body, a box round the axis, reaches _BODY_REACH; the leg spans _LEG_INNER.._LEG_OUTER (the
 # reach of the sole) within _LEG_HALF_ANGLE either side of the line the spin angle points along.
@@ -358,12 +370,9 @@ class TableSim:
         self._max_speed = [T.SLIDE_MAX_SPEED] * self._n + [T.SPIN_MAX_SPEED] * self._n
         self._lower = [-r.slide_limit for r in self.rods] + [-T.SPIN_LIMIT] * self._n
         self._upper = [-v for v in self._lower]
-        # The most a drive can change its joint's speed per second, with nothing else pushing.
-        moving = T.CARRIAGE_MASS + T.ROD_MASS
-        self._accel = [
-            T.SLIDE_MAX_FORCE / (moving + len(r.figurine_offsets) * T.FIGURINE_MASS)
-            for r in self.rods
-        ] + [T.SPIN_MAX_TORQUE / _rod_spin_inertia(r) for r in self.rods]
+        self._accel = [drive_acceleration(r, "slide") for r in self.rods] + [
+            drive_acceleration(r, "spin") for r in self.rods
+        ]
         self.set_drive_gains(slide_gain, spin_gain)
 
         # Bullet keeps one friction and one restitution per body and multiplies two bodies'
@@ -393,6 +402,9 @@ class TableSim:
         self._spawn_ball()
         self._camera: CameraModel | None = None
         self._view = self._proj = None
+        self._shapes: list[tuple[int, int, int, list[float]]] | None = None
+        self._fixed_shown = True
+        self._fixed_layers: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         self.physics_steps = 0
 
     # ----------------------------------------------------------------------------- set-up
@@ -856,12 +868,27 @@ class TableSim:
             )
         return self._camera
 
-    def render(self, width: int = 320, height: int = 180) -> np.ndarray:
-        """An (height, width, 3) uint8 top view from the CPU renderer."""
+    def render(self, width: int = 320, height: int = 180, layered: bool = True) -> np.ndarray:
+        """An (height, width, 3) uint8 top view from the CPU renderer.
+
+        ``layered`` draws the table's fixed parts once per size and then only the rods and
+        the ball, laid over them by depth: the same picture (a test compares them pixel for
+        pixel) in a quarter of the time for one rod, since the field and walls fill most of
+        the frame. Without a GUI only: there the fixed parts must stay on the screen.
+        """
         if width <= 0 or height <= 0:
             raise ValueError(f"image size must be positive, got {width}x{height}")
         self.camera(width, height)
-        _, _, rgba, _, _ = self._p.getCameraImage(
+        if not layered or self.gui:
+            self._show_fixed_parts(True)
+            return self._draw(width, height)[0]
+        fixed_rgb, fixed_depth = self._fixed_layer(width, height)
+        self._show_fixed_parts(False)
+        rgb, depth = self._draw(width, height)
+        return np.where((depth < fixed_depth)[:, :, None], rgb, fixed_rgb)
+
+    def _draw(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+        _, _, rgba, depth, _ = self._p.getCameraImage(
             width,
             height,
             self._view,
@@ -870,7 +897,46 @@ class TableSim:
             shadow=0,
             flags=pybullet.ER_NO_SEGMENTATION_MASK,
         )
-        return np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3].copy()
+        rgb = np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3].copy()
+        return rgb, np.asarray(depth, dtype=np.float32).reshape(height, width)
+
+    def _visual_shapes(self) -> list[tuple[int, int, int, list[float]]]:
+        """(body, link, shape index, colour) of every visual shape, fixed parts first."""
+        if self._shapes is None:
+            shapes, seen = [], collections.Counter()
+            for body in (self.body, self.ball):
+                for shape in self._p.getVisualShapeData(body):
+                    link = shape[1]
+                    shapes.append((body, link, seen[body, link], list(shape[7])))
+                    seen[body, link] += 1
+            self._shapes = shapes
+        return self._shapes
+
+    def _set_visible(self, fixed: bool, visible: bool) -> None:
+        for body, link, index, colour in self._visual_shapes():
+            if (body == self.body and link == -1) == fixed:
+                alpha = colour[3] if visible else 0.0
+                self._p.changeVisualShape(
+                    body, link, shapeIndex=index, rgbaColor=[*colour[:3], alpha]
+                )
+
+    def _show_fixed_parts(self, visible: bool) -> None:
+        if self._fixed_shown != visible:
+            self._set_visible(fixed=True, visible=visible)
+            self._fixed_shown = visible
+
+    def _fixed_layer(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+        """The field and walls alone, with their depth, drawn once per size."""
+        layer = self._fixed_layers.get((width, height))
+        if layer is None:
+            self._show_fixed_parts(True)
+            self._set_visible(fixed=False, visible=False)
+            try:
+                layer = self._draw(width, height)
+            finally:
+                self._set_visible(fixed=False, visible=True)
+            self._fixed_layers[width, height] = layer
+        return layer
 
     def close(self) -> None:
         if not self._closed:

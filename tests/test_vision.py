@@ -216,3 +216,24 @@ def test_a_missing_onnx_model_is_a_clear_error(tmp_path):
     bad.write_bytes(b"not a model")
     with pytest.raises(ValueError, match="cannot read"):
         OnnxBallDetector(bad)
+
+
+@pytest.mark.parametrize("rods", [["home_keeper"], [r.name for r in T.RODS]])
+def test_layered_frames_are_the_frames_of_the_whole_scene_pixel_for_pixel(rods):
+    """``render`` lays the rods and the ball over a once-drawn picture of the field and
+    walls, by depth: it must show exactly what drawing everything at once shows."""
+    sim = TableSim(rods)
+    try:
+        rng = np.random.default_rng(0)
+        n = len(sim.rods)
+        for size in ((320, 180), (W, H)):
+            for _ in range(4):
+                slides = [rng.uniform(-r.slide_limit, r.slide_limit) for r in sim.rods]
+                spins = list(rng.uniform(-1.5, 1.5, n))
+                ball = [rng.uniform(-0.58, 0.58), rng.uniform(-0.32, 0.32), T.BALL_RADIUS]
+                sim.show(slides + spins, ball)
+                layered = sim.render(*size)
+                whole = sim.render(*size, layered=False)
+                assert np.array_equal(layered, whole)
+    finally:
+        sim.close()
