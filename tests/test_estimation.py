@@ -222,3 +222,35 @@ def test_the_estimator_gives_the_observation_the_environment_gives():
     expected = interface.builder.build([0.03, 0.05, 0.4, 0.0], [0.1, 0.0, 2.0, 0.0], truth_ball)
     np.testing.assert_allclose(obs, expected, atol=2e-3)
     assert obs.dtype == np.float32 and obs.shape == (10,)
+
+
+def test_a_new_ball_starts_its_estimate_afresh_instead_of_inheriting_the_old_velocity():
+    """The simulated table serves a new ball where the old one was a moment ago: told so, the
+    filter starts from the new ball's first detection, as an environment's reset does."""
+    told, untold = BallFilter(), BallFilter()
+    for f in (told, untold):
+        for k in range(10):  # the old ball rolling to the right at 2 m/s
+            f.update(k * DT, (-0.2 + 2.0 * k * DT, 0.1))
+    told.forget()
+    assert told.state == (0.0, 0.0, 0.0, 0.0)
+    t0 = 10 * DT
+    for k in range(2):  # the new ball, 0.5 m away, rolling the other way at 5 m/s
+        for f in (told, untold):
+            f.update(t0 + k * DT, (0.3 - 5.0 * k * DT, -0.2))
+    x, y, vx, vy = told.state
+    assert (x, y) == pytest.approx((0.3 - 5.0 * DT, -0.2), abs=2e-3)
+    assert vx == pytest.approx(-5.0, abs=0.3) and abs(vy) < 0.3
+    # Without being told, the filter takes the jump for motion: after the same two frames
+    # (33 ms of a shot that reaches the goal in a tenth of a second) it is far off.
+    assert np.hypot(untold.state[2] + 5.0, untold.state[3]) > 5.0
+
+
+def test_the_estimator_forgets_the_ball_but_keeps_the_rods_it_tracks():
+    interface = task_interface("Foosball-KeeperVsKeeper-v0")
+    estimator = TableStateEstimator(interface.builder, latency_s=0.0)
+    for k in range(5):
+        estimator.update(k * DT, (0.1 * k, 0.0), {"away_keeper": 0.05})
+    rod_before = estimator.rods["away_keeper"].state
+    estimator.new_ball()
+    assert not estimator.ball.initialised
+    assert estimator.rods["away_keeper"].state == rod_before

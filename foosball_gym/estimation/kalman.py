@@ -98,6 +98,12 @@ class BallFilter:
         self.kf.P = np.diag([self.kf.R[0, 0], self.kf.R[1, 1], 10.0**2, 10.0**2])
         self.t = self.last_seen = t
 
+    def forget(self) -> None:
+        """Drop the estimate: the next detection starts afresh, at any time (a new ball put
+        in play). Until then the state is zeros, as before the first detection."""
+        self.kf.x = np.zeros((4, 1))
+        self.t = self.last_seen = None
+
     def update(self, t: float, xy: tuple[float, float] | None) -> None:
         """Advance to time ``t`` and take the detection made then, if any."""
         if self.t is None or (

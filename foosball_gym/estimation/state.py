@@ -69,6 +69,11 @@ class TableStateEstimator:
         for name, rod_filter in self.rods.items():
             rod_filter.update(t, slides.get(name))
 
+    def new_ball(self) -> None:
+        """A ball put in play somewhere else: what was known of the last one is forgotten,
+        as an environment's estimate is at its reset. The rods' estimates stay."""
+        self.ball.forget()
+
     def ball_estimate(self) -> tuple[float, float, float, float]:
         """The ball, predicted ahead by the latency."""
         return self.ball.predict_ahead(self.latency)
