@@ -38,7 +38,10 @@ class _CameraDefault(LibraryDefault):
             from foosball_gym.play.stack import LOCKSTEP_CAMERA, REALTIME_CAMERA
         except ImportError:
             return "play_sim's default"
-        return f"{show_size(LOCKSTEP_CAMERA)}; {show_size(REALTIME_CAMERA)} with --realtime"
+        return (
+            f"{show_size(REALTIME_CAMERA)}; {show_size(LOCKSTEP_CAMERA)} with --lockstep "
+            "and no window"
+        )
 
 
 def add_parser(subparsers: Any) -> None:
@@ -88,11 +91,22 @@ def add_parser(subparsers: Any) -> None:
         metavar="WxH",
         help="the simulated camera's resolution (%(default)s)",
     )
-    p.add_argument(
+    clock = p.add_mutually_exclusive_group()
+    clock.add_argument(
         "--realtime",
-        action="store_true",
-        help="run the simulated table on the wall clock, its camera in a process of its own, "
-        "instead of in lock-step with the loop on simulated time (deterministic)",
+        action="store_const",
+        const="realtime",
+        dest="clock",
+        help="run the simulated table on the wall clock, its camera in a process of its own "
+        "(the default, except with --gui)",
+    )
+    clock.add_argument(
+        "--lockstep",
+        action="store_const",
+        const="lockstep",
+        dest="clock",
+        help="run the simulated table in lock-step with the loop, on simulated time: "
+        "deterministic for a seed, and as slow as the machine makes it",
     )
     p.add_argument(
         "--gui",
@@ -180,6 +194,10 @@ def run(args: argparse.Namespace) -> int:
             "Click the PyBullet window to give it the keyboard. Keys:"
         )
         print(key_map_text(), flush=True)
+    # The window's own drawing takes a core of two: with it, the table keeps pace in lock-step.
+    realtime = args.clock == "realtime" or (args.clock is None and not gui)
+    if args.clock and args.table != "sim":
+        raise CliError(f"--{args.clock} chooses the simulated table's clock: give --table sim")
     try:
         if args.table == "sim":
             report = play_sim(
@@ -190,12 +208,12 @@ def run(args: argparse.Namespace) -> int:
                 log_path=args.log,
                 latency_s=args.latency,
                 status=not args.no_status,
-                realtime=args.realtime,
+                realtime=realtime,
                 gui=gui,
                 human=human,
                 # A person follows the game at the wall clock's speed; paced lock-step slows
                 # down on a machine that cannot keep up instead of tripping the watchdog.
-                pace=gui and not args.realtime,
+                pace=gui and not realtime,
                 **given(args, "seed", "camera_size"),
             )
         else:

@@ -358,7 +358,7 @@ def test_play_and_calibrate_help_show_the_library_defaults(capsys):
         main(["play", "--help"])
     out = " ".join(capsys.readouterr().out.split())
     (w, h), (lw, lh) = REALTIME_CAMERA, LOCKSTEP_CAMERA
-    assert f"({lw}x{lh}; {w}x{h} with --realtime)" in out
+    assert f"({w}x{h}; {lw}x{lh} with --lockstep and no window)" in out
     with pytest.raises(SystemExit):
         main(["calibrate", "--help"])
     pattern, square, home_side = calibrate_table.__defaults__[-3:]

@@ -374,7 +374,8 @@ def test_a_person_plays_the_away_keeper_in_the_window_with_real_key_events(
     assert [key for key, _ in pressed] == ["Up", "Up", "Down", "Down"], pressed
 
     records = log.read_text().splitlines()[1:]  # after the header
-    slides = [json.loads(line)["opponent_slides"]["away_keeper"] for line in records]
+    # None where the camera saw no rod, or no new frame was due (after a serve).
+    slides = [json.loads(line)["opponent_slides"].get("away_keeper") for line in records]
     limit = T.rod("away_keeper").slide_limit
     (_, up_at), (_, up_end), (_, down_at), (_, down_end) = pressed
     assert len(slides) > down_end, len(slides)

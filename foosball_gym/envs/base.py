@@ -82,7 +82,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             through a simulated camera and the real table's Kalman filter
             (:mod:`foosball_gym.envs.estimated`).
         camera_noise: the simulated camera's errors, keys of
-            :class:`~foosball_gym.envs.estimated.CameraNoise` (fps, position_std, rod_std,
+            :class:`~foosball_gym.camera.CameraNoise` (fps, position_std, rod_std,
             drop_rate, hide_under_figurines, latency_s).
 
     Residual learning (off by default):

@@ -12,58 +12,14 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
-from typing import Any
 
 import numpy as np
 
 from foosball_gym import table as T
+from foosball_gym.camera import CameraNoise
 from foosball_gym.interface.observations import ObservationBuilder
 
-
-@dataclass(frozen=True)
-class CameraNoise:
-    """How the simulated camera and detector err.
-
-    Attributes:
-        fps: frames per second (the paper's camera: up to 90).
-        position_std: standard deviation of a detected position on the table (m).
-        rod_std: standard deviation of a measured opponent rod position (m).
-        drop_rate: share of frames in which the detector misses a visible ball.
-        hide_under_figurines: the ball is not seen while a figurine's head covers it.
-        latency_s: from the frame to the drives acting (s); the filter predicts this far
-            ahead, as on the real table.
-    """
-
-    fps: float = 60.0
-    position_std: float = 0.002
-    rod_std: float = 0.003
-    drop_rate: float = 0.02
-    hide_under_figurines: bool = True
-    latency_s: float = 0.03
-
-    @classmethod
-    def from_dict(cls, values: dict[str, Any] | None) -> CameraNoise:
-        values = dict(values or {})
-        allowed = {f.name for f in fields(cls)}
-        unknown = set(values) - allowed
-        if unknown:
-            raise ValueError(
-                f"unknown camera_noise key(s) {sorted(unknown)}; allowed: "
-                f"{', '.join(sorted(allowed))}"
-            )
-        noise = cls(**values)
-        for name in ("fps",):
-            if not getattr(noise, name) > 0:
-                raise ValueError(
-                    f"camera_noise {name} must be positive, got {getattr(noise, name)}"
-                )
-        for name in ("position_std", "rod_std", "latency_s"):
-            if getattr(noise, name) < 0:
-                raise ValueError(f"camera_noise {name} must not be negative")
-        if not 0 <= noise.drop_rate < 1:
-            raise ValueError(f"camera_noise drop_rate must lie in [0, 1), got {noise.drop_rate}")
-        return noise
+__all__ = ["CameraNoise", "EstimatedState"]
 
 
 class EstimatedState:

@@ -36,6 +36,11 @@ class LoopRecord:
     stage_ms: dict[str, float] = field(default_factory=dict)
     #: The loop overran its period: its command reached the table a control step late.
     late: bool = False
+    #: The first loop after a new ball was put in play: the estimate started afresh.
+    new_ball: bool = False
+    #: The frame of ``frame_time`` came too late to use: the filters predicted through it.
+    #: (A frame of None with the last frame's time is no new frame due yet, as after a serve.)
+    frame_missed: bool = False
 
     @property
     def loop_ms(self) -> float:
@@ -53,7 +58,8 @@ class PlayLoop:
         policy: a callable from an observation to an action in [-1, 1].
         interface: the task's observation builder and action mapping.
         drives: the table's drives (``TableDrives``), already brought up.
-        source: the camera (``read() -> (t, frame) | None``).
+        source: the camera (``read() -> (t, frame) | None``, None at its end); a frame of
+            None is one taken at ``t`` that came too late to use, a missed detection.
         detector: the ball detector (``detect(frame) -> Detection | None``).
         calibration: pixel → table-plane back-projection (``pixel_to_table``).
         estimator: the Kalman filters (``update``, ``observation``).
@@ -96,6 +102,8 @@ class PlayLoop:
         self._slot = {(rod, "slide"): i for i, rod in enumerate(rods)}
         self._slot.update({(rod, "spin"): self._n + i for i, rod in enumerate(rods)})
         self._state: Mapping[Joint, tuple[float, float]] = {}
+        self._new_ball = False
+        self._last_frame_time: float | None = None
 
     def start(self, state: Mapping[Joint, tuple[float, float]] | None = None) -> None:
         """Take the drives' state to begin from (``bring_up`` gives positions only)."""
@@ -111,6 +119,12 @@ class PlayLoop:
                 pos[slot], vel[slot] = p, v
         return pos, vel
 
+    def new_ball(self) -> None:
+        """A new ball is in play somewhere else (the simulated table served one): the next
+        frame starts the ball's estimate afresh, as an environment's reset does."""
+        self.estimator.new_ball()
+        self._new_ball = True
+
     def decide(self) -> LoopRecord:
         """Everything before the targets go out: camera to action."""
         times: dict[str, float] = {}
@@ -120,12 +134,14 @@ class PlayLoop:
             raise EOFError("the camera has no more frames")
         frame_time, frame = got
         times["frame"] = time.perf_counter()
-        detection = self.detector.detect(frame)
+        detection = self.detector.detect(frame) if frame is not None else None
         pixel, ball = None, None
         if detection is not None:
             pixel = (float(detection.u), float(detection.v))
             ball = tuple(float(v) for v in self.calibration.pixel_to_table(np.array(pixel)))
-        slides = dict(self.rod_tracker(frame)) if self.rod_tracker is not None else {}
+        slides = {}
+        if self.rod_tracker is not None and frame is not None:
+            slides = dict(self.rod_tracker(frame))
         times["detect"] = time.perf_counter()
         self.estimator.update(frame_time, ball, slides)
         pos, vel = self.own_joints()
@@ -139,7 +155,7 @@ class PlayLoop:
         for name in ("frame", "detect", "estimate", "policy"):
             stage_ms[name] = 1e3 * (times[name] - last)
             last = times[name]
-        return LoopRecord(
+        record = LoopRecord(
             t=self.clock(),
             frame_time=frame_time,
             detection_px=pixel,
@@ -150,7 +166,13 @@ class PlayLoop:
             action=action,
             targets={},
             stage_ms=stage_ms,
+            new_ball=self._new_ball,
+            # None for the time of the last frame is no new frame due, not a late one.
+            frame_missed=frame is None and frame_time != self._last_frame_time,
         )
+        self._last_frame_time = frame_time
+        self._new_ball = False
+        return record
 
     def send(self, record: LoopRecord) -> None:
         """Targets through the safety layer to the drives."""

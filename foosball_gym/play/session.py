@@ -65,6 +65,8 @@ def replay(
     out = []
     _, records = read_session(path)
     for rec in records:
+        if rec.get("new_ball"):
+            estimator.new_ball()
         ball = tuple(rec["ball_measured"]) if rec["ball_measured"] is not None else None
         estimator.update(rec["frame_time"], ball, rec["opponent_slides"])
         pos, vel = own_joints(rec["own_state"])

@@ -9,6 +9,7 @@ builder, policy, safety layer, CAN.
 from __future__ import annotations
 
 import contextlib
+import gc
 import sys
 import time
 from collections.abc import Callable
@@ -51,11 +52,14 @@ class PlayReport:
     #: Time from one loop to the next (ms), and the loops that overran their period.
     period_ms: list[float] = field(default_factory=list)
     late: int = 0
+    #: Loops whose frame came too late to use (the simulated table in real time).
+    frames_missed: int = 0
     _last_t: float | None = None
 
     def add(self, record: LoopRecord) -> None:
         self.steps += 1
         self.late += record.late
+        self.frames_missed += record.frame_missed
         if self._last_t is not None:
             self.period_ms.append(1e3 * (record.t - self._last_t))
         self._last_t = record.t
@@ -71,7 +75,7 @@ class PlayReport:
         return (
             f"loop period median {np.median(periods):.2f} ms, p99 "
             f"{np.percentile(periods, 99):.2f} ms; late {self.late} of {self.steps} loops "
-            f"({share:.2f} %)"
+            f"({share:.2f} %); frames too late to use {self.frames_missed}"
         )
 
     def timing_table(self) -> str:
@@ -87,6 +91,24 @@ class PlayReport:
     @property
     def success_rate(self) -> float:
         return self.successes / self.episodes if self.episodes else 0.0
+
+
+@contextlib.contextmanager
+def collector_paused_for_old_objects() -> Any:
+    """Keep the garbage collector from walking everything the session set up, while it runs.
+
+    A full collection walks every object the interpreter tracks: with the simulator, the
+    drives and the model loaded that took 45 ms on this project's 2-core machine, and it
+    came at random loops, so a table on the wall clock went a watchdog period without a
+    command. Frozen, the objects made before the loop are left out of every collection; the
+    loop's own garbage is still collected, in the young generations as it comes.
+    """
+    gc.collect()
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def build_perception(
@@ -173,7 +195,7 @@ def play_real(
     on_record, log = _recorders(report, log_path, _header(interface, config), status)
     period = config.control_period
     try:
-        with TableDrives(config) as drives:
+        with TableDrives(config) as drives, collector_paused_for_old_objects():
             drives.bring_up()
             loop = PlayLoop(policy, interface, drives, source, *perception, on_record=on_record)
             loop.start()
@@ -206,12 +228,17 @@ def play_sim(
     gui: bool = False,
     human: str | None = None,
     pace: bool = False,
+    camera_latency_s: float | None = None,
 ) -> PlayReport:
     """Play ``episodes`` served balls on the simulated table, through the whole stack.
 
     ``realtime`` runs the table on the wall clock (see
     :mod:`foosball_gym.sim_table.simulated_table`); the default is lock-step. The camera's
     frames are 640 x 360 in lock-step and 320 x 180 in real time unless ``camera_size`` says.
+
+    ``camera_latency_s`` is how long the simulated camera's frames take to reach the loop
+    (see :class:`~foosball_gym.sim_table.simulated_table.SimulatedTable`; by default the
+    latency of the task's simulated camera, 30 ms unless ``camera_noise`` says).
 
     ``gui`` opens the PyBullet GUI on the table, with the serve and the score written in the
     window. ``human`` names the away rod (``"keeper"``, or in Foosball-FullGame-v0 also
@@ -242,6 +269,7 @@ def play_sim(
         config,
         seed=seed,
         camera_size=camera_size,
+        camera_latency_s=camera_latency_s,
         realtime=realtime,
         gui=gui,
         pace=pace,
@@ -261,7 +289,10 @@ def play_sim(
     try:
         # Supervision runs on the table's clock: simulated time in lock-step, where a slow
         # frame is no silence on the table, and the wall clock in real time.
-        with TableDrives(config, clock=table.clock) as drives:
+        with (
+            TableDrives(config, clock=table.clock) as drives,
+            collector_paused_for_old_objects(),
+        ):
             drives.bring_up()
             loop = PlayLoop(
                 policy,
@@ -277,6 +308,9 @@ def play_sim(
             record = None
             for serve in range(1, episodes + 1):
                 table.serve()
+                # Without this the filter would take the new ball for the old one jumping,
+                # and spend the first frames of a fast shot unlearning that velocity.
+                loop.new_ball()
                 if gui:
                     table.show_text(_score_lines(report, table, serve, episodes, rod))
                 if record is not None and realtime:
@@ -284,10 +318,11 @@ def play_sim(
                     # keep their last targets, and the watchdog hears the loop is alive.
                     loop.send(record)
                 for _ in range(max_steps):
+                    # A step the table took while the loop was busy: its command was late.
+                    late = table.late_steps
                     record = loop.decide()
                     true_x, true_y, _, _ = table.ball(at=record.frame_time)
                     loop.send(record)
-                    late = table.late_steps
                     goal, out = table.step()
                     record.late = table.late_steps > late
                     loop.receive(record)
@@ -344,8 +379,10 @@ class _TableCamera:
     def __init__(self, table: Any) -> None:
         self.table = table
 
-    def read(self) -> tuple[float, np.ndarray]:
+    def read(self) -> tuple[float, np.ndarray | None]:
         t, frame = self.table.read()
+        if frame is None:
+            return t, None
         return t, np.ascontiguousarray(frame[:, :, ::-1])  # RGB to the BGR of OpenCV sources
 
     def close(self) -> None:

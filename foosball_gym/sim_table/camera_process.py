@@ -10,6 +10,7 @@ take a frame period or more.
 
 from __future__ import annotations
 
+import collections
 import math
 import multiprocessing
 import threading
@@ -42,13 +43,56 @@ def _serve(conn: Connection, rods: tuple[str, ...], width: int, height: int) -> 
         sim.close()
 
 
+Stamp = tuple[int, float]
+Frame = tuple[Stamp, np.ndarray]
+# Frames kept for a camera's latency: a few control periods' worth.
+KEPT_FRAMES = 8
+
+
+class FrameBuffer:
+    """The last frames a camera took, and which of them a loop has been given.
+
+    :meth:`give` hands out the newest frame stamped between ``after`` and ``upto`` (a frame
+    is usable once its latency has passed), each frame once: asked again with nothing newer,
+    it says so with ``(stamp, None)``, the stamp of the last frame given.
+    """
+
+    def __init__(self) -> None:
+        self.frames: collections.deque[Frame] = collections.deque(maxlen=KEPT_FRAMES)
+        self.given: Stamp | None = None
+
+    def add(self, frame: Frame) -> None:
+        self.frames.append(frame)
+
+    def new(self, stamp: Stamp) -> bool:
+        """Whether a frame stamped ``stamp`` would be news to the loop."""
+        return self.given is None or stamp > self.given
+
+    def newest(self, after: Stamp, upto: Stamp) -> Frame | None:
+        for frame in reversed(self.frames):
+            if after <= frame[0] <= upto:
+                return frame
+        return None
+
+    def give(self, after: Stamp, upto: Stamp) -> tuple[Stamp, np.ndarray | None] | None:
+        """The newest usable frame not given yet; ``(last stamp given, None)`` when there is
+        none but one was given since ``after``; None when none was."""
+        frame = self.newest(after, upto)
+        if frame is not None and self.new(frame[0]):
+            self.given = frame[0]
+            return frame
+        if self.given is not None and self.given >= after:
+            return self.given, None
+        return None
+
+
 class CameraProcess:
     """Renders scenes of a table with ``rods`` in a separate process, one at a time.
 
     :meth:`request` hands over a scene without waiting; :meth:`latest` gives the newest frame
-    rendered so far, waiting only when none has come since the last call. Scenes are stamped
-    ``(serve, t)``: the serve they belong to and their time, so that a frame taken just before
-    a serve is told from one taken just after it at the same time.
+    rendered so far that may be used, waiting only for one being rendered. Scenes are
+    stamped ``(serve, t)``: the serve they belong to and their time, so that a frame taken
+    just before a serve is told from one taken just after it at the same time.
     """
 
     def __init__(self, rods: Sequence[str], width: int, height: int) -> None:
@@ -64,13 +108,17 @@ class CameraProcess:
             self.close()
             raise RuntimeError(f"the camera process did not start within {START_TIMEOUT_S} s")
         self._lock = threading.Lock()
-        self._pending = 0
-        self._frame: tuple[tuple[int, float], np.ndarray] | None = None
-        self._fresh = False
+        self._requested: collections.deque[Stamp] = collections.deque()
+        self._buffer = FrameBuffer()
+
+    @property
+    def given(self) -> Stamp | None:
+        """The stamp of the last frame :meth:`latest` gave."""
+        return self._buffer.given
 
     def request(
         self,
-        stamp: tuple[int, float],
+        stamp: Stamp,
         positions: Sequence[float],
         ball: Sequence[float],
         *,
@@ -80,38 +128,62 @@ class CameraProcess:
         drops frames it has no time for); ``queue`` renders it after that one instead."""
         with self._lock:
             self._collect(block=False)
-            if self._pending and not queue:
+            if self._requested and not queue:
                 return
             self._conn.send((stamp, list(positions), list(ball)))
-            self._pending += 1
+            self._requested.append(stamp)
 
     def latest(
-        self, after: tuple[int, float] = (0, -math.inf), timeout: float = 1.0
-    ) -> tuple[tuple[int, float], np.ndarray]:
-        """The newest frame and its scene's stamp, waiting for one stamped ``after`` or later,
-        and for a new one when none has come since the last call."""
-        deadline = time.monotonic() + timeout
+        self,
+        after: Stamp = (0, -math.inf),
+        upto: Stamp = (math.inf, math.inf),
+        timeout: float = 1.0,
+        patience: float | None = None,
+    ) -> tuple[Stamp, np.ndarray | None]:
+        """The newest frame stamped between ``after`` and ``upto`` not given before, waiting
+        for one being rendered, and for one stamped ``after`` or later if none has come.
+
+        ``(stamp, None)`` says there is no new frame to use: the one of ``stamp`` is still
+        being rendered after ``patience`` (s), or none newer than the last frame given, of
+        ``stamp``, is due. A shared machine sometimes holds the renderer up for tens of
+        milliseconds, and a loop that waited for it would go a watchdog period without a
+        command.
+        """
+        now = time.monotonic()
+        deadline = now + timeout
+        give_up = min(deadline, now + patience) if patience is not None else deadline
+        buffer = self._buffer
         while True:
             with self._lock:
                 self._collect(block=False)
-                if not self._fresh and self._pending:
-                    self._collect(block=True, timeout=max(deadline - time.monotonic(), 0.0))
-                if self._frame is not None and self._frame[0] >= after:
-                    self._fresh = False
-                    return self._frame
+                newest = buffer.newest(after, upto)
+                coming = [
+                    s
+                    for s in self._requested
+                    if after <= s <= upto and buffer.new(s) and (newest is None or s > newest[0])
+                ]
+                if coming:
+                    wait = give_up - time.monotonic()
+                    if wait > 0:
+                        self._collect(block=True, timeout=wait)
+                        continue
+                    if newest is not None and buffer.new(newest[0]):
+                        buffer.given = newest[0]
+                        return newest
+                    return coming[-1], None
+                given = buffer.give(after, upto)
+                if given is not None:
+                    return given
             if time.monotonic() > deadline:
                 raise RuntimeError(f"the camera process sent no frame within {timeout} s")
             # The scene asked for is not requested yet: the table's next step will.
             time.sleep(0.001)
 
-    def _collect(self, block: bool, timeout: float = 1.0) -> None:
-        while self._pending and (self._conn.poll(timeout if block else 0)):
-            self._frame = self._conn.recv()
-            self._pending -= 1
-            self._fresh = True
+    def _collect(self, block: bool, timeout: float = 0.0) -> None:
+        while self._requested and self._conn.poll(timeout if block else 0):
+            self._buffer.add(self._conn.recv())
+            self._requested.popleft()
             block = False
-        if block and not self._fresh:
-            raise RuntimeError(f"the camera process sent no frame within {timeout} s")
 
     def close(self) -> None:
         """Stop the process; safe to call twice."""

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import collections
 import itertools
+import math
 import os
 import threading
 import time
@@ -37,15 +38,15 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.camera import CameraModel
+from foosball_gym.camera import CameraModel, CameraNoise
 from foosball_gym.game import Game
 from foosball_gym.hardware.config import BusConfig, JointConfig, TableConfig
 from foosball_gym.interface.task import TaskInterface
 from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
-from foosball_gym.sim_table.camera_process import CameraProcess
+from foosball_gym.sim_table.camera_process import CameraProcess, FrameBuffer
 from foosball_gym.sim_table.drives import SimulatedDrives
 from foosball_gym.sim_table.viewer_process import ViewerProcess
-from foosball_gym.simulator import TableSim
+from foosball_gym.simulator import TableSim, drive_acceleration
 from foosball_gym.tasks import interface_of, make_task
 
 # Calibration of the simulated drives: arbitrary but drive-like, and the revolute drive turned
@@ -53,6 +54,9 @@ from foosball_gym.tasks import interface_of, make_task
 SLIDE_INCREMENTS_PER_M = 90_000.0
 SPIN_INCREMENTS_PER_RAD = 3600 / (2 * np.pi)
 SIM_HEARTBEAT_TIMEOUT_S = 1.0
+# The share of a control period a real-time loop waits for a frame still being rendered (a
+# 320 x 180 frame takes 3 ms for one rod, 6 ms for all eight): the rest is the loop's.
+FRAME_PATIENCE = 0.6
 _channels = itertools.count()
 
 
@@ -73,6 +77,10 @@ def sim_table_config(interface: TaskInterface, mode: str = "csp") -> TableConfig
                     node_id=node,
                     increments_per_unit=scale,
                     direction=direction,
+                    # What the simulated drive reaches: the safety layer's default is a guess
+                    # kept well inside a real drive's, which would make this table's keeper
+                    # slower than the environment's.
+                    max_acceleration=drive_acceleration(T.rod(rod), kind),
                 )
             )
             node += 1
@@ -97,6 +105,11 @@ class SimulatedTable:
             bus must be a ``virtual`` one.
         seed: seeds the serves (and the opponent's randomness, if any).
         camera_size: (width, height) of the rendered camera frames.
+        camera_latency_s: how long after it is taken a frame reaches the loop (s): exposure,
+            readout and transfer on a real camera. By default the latency of the task's
+            simulated camera (``estimated_state``, its ``camera_noise``), so a policy meets
+            the latency it was trained with; the first frame of a serve comes at once, as at
+            an environment's reset.
         realtime: keep the wall clock's time (see the module's docstring) instead of lock-step.
         gui: show the table in a PyBullet GUI window (needs a display).
         pace: in lock-step, keep steps from running ahead of the wall clock.
@@ -109,6 +122,7 @@ class SimulatedTable:
         config: TableConfig,
         seed: int = 0,
         camera_size: tuple[int, int] = (640, 360),
+        camera_latency_s: float | None = None,
         realtime: bool = False,
         gui: bool = False,
         pace: bool = False,
@@ -127,7 +141,13 @@ class SimulatedTable:
         self.time = 0.0
         self.steps = 0
         self.late_steps = 0
+        if camera_latency_s is None:
+            camera_latency_s = CameraNoise.from_dict(options.get("camera_noise")).latency_s
+        if not camera_latency_s >= 0:
+            raise ValueError(f"camera_latency_s must be 0 or more, got {camera_latency_s!r}")
+        self.camera_latency = float(camera_latency_s)
         self._camera: CameraProcess | None = None
+        self._frames = FrameBuffer()  # lock-step's frames, for their latency
         self._viewer: ViewerProcess | None = None
         self._thread: threading.Thread | None = None
         try:
@@ -231,13 +251,29 @@ class SimulatedTable:
         """The camera's view of the table now, RGB (lock-step)."""
         return self.sim.render(self.camera_model.width, self.camera_model.height)
 
-    def read(self) -> tuple[float, np.ndarray]:
-        """The newest camera frame and the table time it shows, RGB: the one just rendered in
-        lock-step, the newest the camera process has finished in real time."""
+    def read(self) -> tuple[float, np.ndarray | None]:
+        """The newest camera frame whose latency has passed and the table time it shows, RGB;
+        a frame of ``None`` where no new one is due (the time is then the last frame's), or
+        the one due came too late to use.
+
+        Lock-step renders a frame at every call. In real time the camera process renders one
+        at every step of the table, and a frame still being rendered is waited for at most
+        :data:`FRAME_PATIENCE` of a control period, leaving the loop time to decide and
+        command within the period.
+        """
+        serve = (self._serves, self._served_at)
+        given = (self._camera or self._frames).given
+        # The first frame of a serve is seen at once, as an environment's reset shows it.
+        due = (self._serves, self.time - self.camera_latency + 1e-9)
+        upto = due if given is not None and given >= serve else (self._serves, math.inf)
         if self._camera is None:
-            return self.time, self.frame()
+            self._frames.add(((self._serves, self.time), self.frame()))
+            (_, t), frame = self._frames.give(serve, upto) or (serve, None)
+            return t, frame
         # A frame from before the serve shows a ball that is no longer there.
-        (_, t), frame = self._camera.latest(after=(self._serves, self._served_at))
+        (_, t), frame = self._camera.latest(
+            after=serve, upto=upto, patience=FRAME_PATIENCE * self.sim.control_dt
+        )
         return t, frame
 
     def _keep_pace(self) -> None:
