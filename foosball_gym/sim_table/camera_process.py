@@ -1,11 +1,12 @@
 """The simulated table's camera in a process of its own, so that frames come in real time.
 
-PyBullet's CPU renderer needs about 12 ms for a 320 x 180 frame of the table and 46 ms for
-640 x 360 (measured on one core): more than the loop can spare in its 16.7 ms period. A
-second process holds a copy of the table that only poses and renders. Each control step the
-table sends it the new scene; while it renders that one, the loop takes the frame of the step
-before. A real camera's frame is as old when the loop gets it: exposure, readout and transfer
-take a frame period or more.
+PyBullet's CPU renderer needs about 3 ms for a 320 x 180 frame of one rod and 5 ms for all
+eight (the field and walls drawn once, see ``TableSim.render``; measured on one core), time
+the loop's own core cannot spare on top of its work, and a shared machine sometimes holds a
+render up for tens of milliseconds. A second process holds a copy of the table that only
+poses and renders. Each control step the table sends it the new scene, and the loop takes
+the newest frame whose latency has passed: a real camera's frame is some 30 ms old when the
+loop gets it (exposure, readout and transfer).
 """
 
 from __future__ import annotations
