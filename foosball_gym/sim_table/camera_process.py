@@ -168,9 +168,10 @@ class CameraProcess:
                     if wait > 0:
                         self._collect(block=True, timeout=wait)
                         continue
-                    if newest is not None and buffer.new(newest[0]):
-                        buffer.given = newest[0]
-                        return newest
+                    # Too late: an older frame not given yet still serves, else none does.
+                    given = buffer.give(after, upto)
+                    if given is not None and given[1] is not None:
+                        return given
                     return coming[-1], None
                 given = buffer.give(after, upto)
                 if given is not None:

@@ -55,7 +55,7 @@ SLIDE_INCREMENTS_PER_M = 90_000.0
 SPIN_INCREMENTS_PER_RAD = 3600 / (2 * np.pi)
 SIM_HEARTBEAT_TIMEOUT_S = 1.0
 # The share of a control period a real-time loop waits for a frame still being rendered (a
-# 320 x 180 frame takes 3 ms for one rod, 6 ms for all eight): the rest is the loop's.
+# 320 x 180 frame takes 3 ms for one rod, 5 ms for all eight): the rest is the loop's.
 FRAME_PATIENCE = 0.6
 _channels = itertools.count()
 
