@@ -37,6 +37,9 @@ if hasattr(T, "FIGURINE_LEG_SECTIONS"):
 else:
     _LEG_FRONT = T.FIGURINE_SIZE[0] / 2
     _LEG_HALF_WIDTH = T.FIGURINE_SIZE[1] / 2
+# How far before the keeper's line a deflection probe's ball is served (m): about the distance
+# of the task's serves, so that it meets the foot turning as theirs do.
+DEFLECTION_RUN = 0.55
 # Beyond this spin (rad) the foot's sole is above a ball on the table.
 _FOOT_CLEARS_BALL = math.acos((T.ROD_HEIGHT - 2 * R) / T.FIGURINE_FOOT_BELOW_AXIS)
 
@@ -458,3 +461,51 @@ def swinging_foot(sim: TableSim, ball_speed: float) -> dict:
         "speed_after": math.hypot(vx, vy),
         "behind": x < KEEPER.x,
     }
+
+
+def deflection(sim: TableSim, speed: float, angle_deg: float, offset: float) -> dict:
+    """Where a still keeper sends a ball that rolls into it: the deflection a keeper aims.
+
+    The ball is launched at ``speed`` and ``angle_deg`` from -x (positive: moving towards +y)
+    so that it crosses the keeper's line x = -0.522 at y = 0, from DEFLECTION_RUN m before
+    that line (less where a steep ball would meet a side wall first), as a served ball comes
+    from half the table away, turning on its way as such a ball does. The keeper holds its
+    figurine still and upright (spin 0) at y = -``offset``: ``offset`` is the ball's crossing
+    y minus the figurine's, so the ball meets the flat face near 0 and a rounded end beyond
+    about +-0.009 m.
+
+    Returns:
+        ``out_deg``: the ball's direction from +x (positive towards +y) and ``out_speed`` its
+        speed three control steps after the first sample at which it had left the foot
+        (vx > 0, x > keeper.x + 0.04). Both None if it did not leave within 2 s, scored or
+        left the table.
+    """
+    a = math.radians(angle_deg)
+    vx, vy = -speed * math.cos(a), speed * math.sin(a)
+    if vx >= 0:
+        raise ValueError(f"the ball must come towards the keeper, got angle {angle_deg} deg")
+    run = DEFLECTION_RUN
+    if vy != 0.0:
+        run = min(run, (WALL_Y - 0.04) * -vx / abs(vy))
+    sim.reset(
+        slide=[-offset],
+        spin=[0.0],
+        ball_position=(KEEPER.x + run, vy / vx * run),
+        ball_velocity=(vx, vy),
+    )
+    none = {"out_deg": None, "out_speed": None}
+    left_at = None
+    for k in range(round(2.0 / _control_dt(sim))):
+        sim.command("position", [-offset, 0.0])
+        goal, out = sim.step()
+        if goal != T.NO_GOAL or out:
+            return none
+        x, _, bvx, bvy = sim.ball_xy()
+        if left_at is None and bvx > 0 and x > KEEPER.x + 0.04:
+            left_at = k
+        if left_at is not None and k - left_at >= 2:
+            return {
+                "out_deg": math.degrees(math.atan2(bvy, bvx)),
+                "out_speed": math.hypot(bvx, bvy),
+            }
+    return none

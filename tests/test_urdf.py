@@ -152,6 +152,7 @@ def test_wheel_ships_the_urdf_and_the_cli_and_an_installed_copy_runs(tmp_path):
     assert "foosball_gym/urdf/foosball_table.urdf" in names
     assert "foosball_gym/urdf/ball.urdf" in names
     assert "foosball_gym/urdf/figurine_leg.obj" in names
+    assert "foosball_gym/policies/deflection_table.npz" in names
     shipped_cli = {n for n in names if n.startswith("foosball_gym/cli/")}
     assert shipped_cli == {f"foosball_gym/cli/{p.name}" for p in (ROOT / "cli").glob("*.py")}
     site = tmp_path / "site"
@@ -173,6 +174,8 @@ def test_wheel_ships_the_urdf_and_the_cli_and_an_installed_copy_runs(tmp_path):
         "import foosball_gym, gymnasium as gym, sys;"
         "assert foosball_gym.__file__.startswith(sys.argv[1]), foosball_gym.__file__;"
         "env = gym.make('Foosball-Block-v0'); env.reset(seed=0); env.step([0.0]);"
+        "env = gym.make('Foosball-Score-v0', ball_start='incoming'); obs, _ = env.reset(seed=0);"
+        "env.step(env.unwrapped.scripted_policy()(obs));"
         "import foosball_gym.cli as cli;"
         "assert cli.__file__.startswith(sys.argv[1]), cli.__file__;"
         "assert cli.main(['envs']) == 0;"

@@ -87,9 +87,11 @@ class ScoreTask(Task):
         return values
 
     def scripted_policy(self, names: list[str]) -> ScriptedTeam:
-        """The scripted keeper, striking incoming balls (blocked ones trickle out of reach)
-        and aiming past the obstacles."""
-        return ScriptedTeam(names, self.layout.controlled, "both", volley=True, aim=True)
+        """The scripted keeper, deflecting incoming balls to the goal (or striking them where
+        it cannot: blocked ones trickle out of reach) and aiming past the obstacles."""
+        return ScriptedTeam(
+            names, self.layout.controlled, "both", volley=True, aim=True, deflect=True
+        )
 
     def success(self, goals_for: int, goals_against: int) -> bool:
         return goals_for > 0
