@@ -56,6 +56,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "selfplay_window": {"type": positive_int},
     "selfplay_threshold": {"type": float},
     "selfplay_pool": {"type": positive_int},
+    "selfplay_scripted_share": {"type": float},
     "target_success": {"type": float},
     "video_every": {"type": positive_int, "metavar": "N"},
 }

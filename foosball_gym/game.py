@@ -146,11 +146,13 @@ class Game:
             raise ValueError(f"{type(self.task).__name__} has no opponent to set")
         if policy is not None and not callable(policy):
             raise ValueError(f"an opponent must be a callable obs -> action, got {policy!r}")
-        if policy is None:
-            policy = ScriptedTeam(
-                self._opp_builder.names, self._opp_builder.own, self.task.layout.joints
-            )
-        self._opponent = policy
+        self._opponent = self.scripted_opponent() if policy is None else policy
+
+    def scripted_opponent(self) -> ScriptedTeam:
+        """A scripted team for the away side, acting on its mirrored observation."""
+        if self._opp_builder is None:
+            raise ValueError(f"{type(self.task).__name__} has no opponent")
+        return ScriptedTeam(self._opp_builder.names, self._opp_builder.own, self.task.layout.joints)
 
     def opponent_observation(self) -> np.ndarray:
         """What the opponent sees now: the mirrored observation."""

@@ -174,6 +174,11 @@ def config_of(parser, argv):
             "argument --learning-rate: must be a finite number above 0",
         ),
         pytest.param(
+            ["train", "Foosball-KeeperVsKeeper-v0", "--selfplay-scripted-share", "1.5"],
+            "selfplay_scripted_share must be in [0, 1), got 1.5",
+            marks=needs_train,
+        ),
+        pytest.param(
             ["train", "Foosball-Block-v0", "--out", "/dev/null/run", "--no-progress"],
             "--out /dev/null/run: /dev/null is a file, not a folder",
             marks=needs_train,

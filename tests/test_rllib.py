@@ -140,6 +140,7 @@ def test_opponent_is_replaced_by_the_rule_both_backends_share(tmp_path):
         ({"self_play": False}, "by self-play"),
         ({"pretrain_episodes": 10}, "does not pretrain"),
         ({"video_every": 1000}, "writes no clips"),
+        ({"selfplay_scripted_share": 0.2}, "plays snapshots only"),
     ],
 )
 def test_what_the_rllib_backend_cannot_train_is_refused(overrides, message):

@@ -17,7 +17,7 @@ from foosball_gym.training import (  # noqa: E402
     SelfPlayCallback,
     SelfPlayVecEnv,
 )
-from foosball_gym.training.selfplay import game_result  # noqa: E402
+from foosball_gym.training.selfplay import AGAINST_ANCHOR, game_result  # noqa: E402
 
 ENV = "Foosball-KeeperVsKeeper-v0"
 
@@ -179,3 +179,48 @@ def test_snapshot_normalises_like_vecnormalize():
 def test_bad_self_play_settings_are_rejected(kwargs, message):
     with pytest.raises(ValueError, match=message):
         SelfPlayCallback(**kwargs)
+
+
+def test_a_share_of_games_is_played_against_the_scripted_anchor_and_left_out_of_the_rule():
+    venv = make_vec_env(
+        ENV,
+        n_envs=4,
+        seed=0,
+        wrapper_class=OpponentActionWrapper,
+        env_kwargs={"stagnation_steps": 20},
+    )
+    anchor = venv.env_method("scripted_opponent", indices=[0])[0]
+    env = SelfPlayVecEnv(
+        venv, lambda obs: np.zeros((len(obs), 2), np.float32), 0, anchor=anchor, anchor_share=0.5
+    )
+    model = PPO("MlpPolicy", env, n_steps=128, batch_size=128, n_epochs=1, seed=0, device="cpu")
+    callback = SelfPlayCallback(window=1000, threshold=0.99)
+    ended = []
+
+    class Ends(SelfPlayCallback):
+        def _on_step(self):
+            ended.extend(
+                bool(info.get(AGAINST_ANCHOR))
+                for done, info in zip(self.locals["dones"], self.locals["infos"])
+                if done
+            )
+            return True
+
+    model.learn(3000, callback=[callback, Ends()])
+    env.close()
+    anchored = sum(ended)
+    # Both kinds of game were played, about half each, and only the snapshot's count.
+    assert 0.25 < anchored / len(ended) < 0.75, ended
+    assert callback.games == len(ended) - anchored
+    assert len(callback._anchor_goals) == anchored
+
+
+@pytest.mark.parametrize("share", [-0.1, 1.0])
+def test_a_bad_anchor_share_is_refused(share):
+    venv = make_vec_env(ENV, n_envs=1, seed=0, wrapper_class=OpponentActionWrapper)
+    anchor = venv.env_method("scripted_opponent", indices=[0])[0]
+    with pytest.raises(ValueError, match=r"anchor_share must be in \[0, 1\)"):
+        SelfPlayVecEnv(venv, lambda obs: obs[:, :2] * 0, anchor=anchor, anchor_share=share)
+    with pytest.raises(ValueError, match="only with an anchor"):
+        SelfPlayVecEnv(venv, lambda obs: obs[:, :2] * 0, anchor_share=0.5)
+    venv.close()

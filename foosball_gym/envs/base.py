@@ -295,6 +295,13 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise ValueError(f"{type(self).__name__} has no opponent to set")
         self.game.set_opponent(policy)
 
+    def scripted_opponent(self) -> ScriptedTeam:
+        """A scripted team for the away side (the default opponent), acting on the mirrored
+        observation."""
+        if not self.layout.opponent:
+            raise ValueError(f"{type(self).__name__} has no opponent")
+        return self.game.scripted_opponent()
+
     def opponent_observation(self) -> np.ndarray:
         """What the opponent sees now: the mirrored observation."""
         if not self.layout.opponent:

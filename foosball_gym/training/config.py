@@ -131,6 +131,11 @@ class TrainConfig:
     selfplay_window: int = _field(100, "games the self-play rule judges")
     selfplay_threshold: float = _field(0.2, "the self-play rule's threshold")
     selfplay_pool: int = _field(1, "draw opponents from this many latest snapshots")
+    selfplay_scripted_share: float = _field(
+        0.0,
+        "share of self-play games against the scripted opponent instead of a snapshot, in "
+        "[0, 1); they do not count towards replacing the opponent",
+    )
     eval_freq: int = _field(10_000, "evaluate every this many steps")
     eval_episodes: int = _field(50, "seeded episodes per evaluation")
     checkpoint_freq: int = _field(50_000, "write a checkpoint every this many steps")
@@ -168,6 +173,10 @@ class TrainConfig:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
         if int(self.seed) < 0:
             raise ValueError(f"seed must be 0 or more, got {self.seed}")
+        if not 0.0 <= float(self.selfplay_scripted_share) < 1.0:
+            raise ValueError(
+                f"selfplay_scripted_share must be in [0, 1), got {self.selfplay_scripted_share}"
+            )
         if int(self.pretrain_episodes) < 0:
             raise ValueError(f"pretrain_episodes must be 0 or more, got {self.pretrain_episodes}")
         if self.algo == "ppo" and (self.n_steps * self.n_envs < 2 or self.batch_size < 2):

@@ -93,7 +93,16 @@ def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
     if config.self_play:
         # The first opponent is replaced by a snapshot of the learner as training starts.
         n = venv.action_space.shape[0] // 2
-        venv = SelfPlayVecEnv(venv, lambda obs: np.zeros((len(obs), n), np.float32), config.seed)
+        anchor = None
+        if config.selfplay_scripted_share:
+            anchor = venv.env_method("scripted_opponent", indices=[0])[0]
+        venv = SelfPlayVecEnv(
+            venv,
+            lambda obs: np.zeros((len(obs), n), np.float32),
+            config.seed,
+            anchor=anchor,
+            anchor_share=config.selfplay_scripted_share,
+        )
     if config.normalize or config.normalize_reward:
         venv = VecNormalize(
             venv, norm_obs=config.normalize, norm_reward=config.normalize_reward, gamma=config.gamma

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections import deque
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,9 @@ from foosball_gym.training.selfplay_rule import ReplacementRule, history_record,
 from foosball_gym.training.snapshot import PolicySnapshot
 
 OPPONENT_OBS = "opponent_obs"
+# In the info of a game's last step: the game was against the scripted anchor, not a snapshot.
+AGAINST_ANCHOR = "against_scripted_anchor"
+_ANCHOR = -1  # the pool index that stands for the anchor
 
 
 class _QueuedAction:
@@ -81,12 +85,29 @@ class SelfPlayVecEnv(VecEnvWrapper):
         venv: the vectorised envs (each wrapped in ``OpponentActionWrapper``).
         opponent: the first opponent (a callable on a batch of observations).
         seed: seeds the choice of opponents from the pool.
+        anchor: a fixed opponent acting on one observation (the scripted team), played in
+            ``anchor_share`` of the games instead of the pool; the last step's info of such a
+            game says so (``AGAINST_ANCHOR``), so that the replacement rule can leave it out.
+        anchor_share: the share of games against ``anchor``, in [0, 1).
     """
 
-    def __init__(self, venv: VecEnv, opponent: Any, seed: int | None = None) -> None:
+    def __init__(
+        self,
+        venv: VecEnv,
+        opponent: Any,
+        seed: int | None = None,
+        anchor: Any = None,
+        anchor_share: float = 0.0,
+    ) -> None:
         n = venv.action_space.shape[0] // 2
         learner_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
         super().__init__(venv, action_space=learner_space)
+        if not 0.0 <= anchor_share < 1.0 or (anchor_share > 0.0 and anchor is None):
+            raise ValueError(
+                f"anchor_share must be in [0, 1), and above 0 only with an anchor; got "
+                f"{anchor_share!r} with {'an' if anchor is not None else 'no'} anchor"
+            )
+        self.anchor, self.anchor_share = anchor, float(anchor_share)
         self.pool: list[Any] = [opponent]
         self._rng = np.random.default_rng(seed)
         self._assigned = np.zeros(self.num_envs, dtype=int)
@@ -103,6 +124,8 @@ class SelfPlayVecEnv(VecEnvWrapper):
         self._assigned = np.minimum(self._assigned, len(self.pool) - 1)
 
     def _draw(self) -> int:
+        if self.anchor_share and self._rng.random() < self.anchor_share:
+            return _ANCHOR
         return int(self._rng.integers(len(self.pool)))
 
     # -- VecEnv -------------------------------------------------------------
@@ -118,7 +141,10 @@ class SelfPlayVecEnv(VecEnvWrapper):
         opp = np.zeros_like(actions, dtype=np.float32)
         for k in np.unique(self._assigned):
             idx = np.nonzero(self._assigned == k)[0]
-            opp[idx] = self.pool[k](self._opp_obs[idx])
+            if k == _ANCHOR:
+                opp[idx] = np.stack([self.anchor(o) for o in self._opp_obs[idx]])
+            else:
+                opp[idx] = self.pool[k](self._opp_obs[idx])
         self.opponent_seconds += time.perf_counter() - start
         self.venv.step_async(np.concatenate([actions, opp], axis=1))
 
@@ -126,6 +152,8 @@ class SelfPlayVecEnv(VecEnvWrapper):
         obs, rewards, dones, infos = self.venv.step_wait()
         for i, done in enumerate(dones):
             if done:
+                if self._assigned[i] == _ANCHOR:
+                    infos[i][AGAINST_ANCHOR] = True
                 self._opp_obs[i] = self.venv.reset_infos[i][OPPONENT_OBS]
                 self._assigned[i] = self._draw()
             else:
@@ -163,7 +191,10 @@ class SelfPlayCallback(BaseCallback):
         rule: ``"win_rate"`` or ``"net_score"``.
 
     TensorBoard gets the window's rates and ``selfplay/elo``, the learner's rating against its
-    opponents (see :class:`~foosball_gym.training.selfplay_rule.ReplacementRule`).
+    opponents (see :class:`~foosball_gym.training.selfplay_rule.ReplacementRule`). Games
+    against a scripted anchor (:class:`SelfPlayVecEnv`) are left out of the rule and counted
+    apart: ``selfplay/anchor_goals_for`` and ``_against``, the learner's goals per game over
+    its last ``window`` games against the anchor.
     """
 
     def __init__(
@@ -184,6 +215,7 @@ class SelfPlayCallback(BaseCallback):
         self.pool: list[PolicySnapshot] = []
         self.history: list[dict[str, Any]] = []
         self._env: SelfPlayVecEnv | None = None
+        self._anchor_goals: deque[tuple[int, int]] = deque(maxlen=window)
 
     @property
     def generation(self) -> int:
@@ -207,7 +239,9 @@ class SelfPlayCallback(BaseCallback):
 
     def _on_step(self) -> bool:
         for done, info in zip(self.locals["dones"], self.locals["infos"]):
-            if done:
+            if done and info.get(AGAINST_ANCHOR):
+                self._anchor_goals.append((info.get("goals_for", 0), info.get("goals_against", 0)))
+            elif done:
                 replaced = self.judge.record(game_result(info))
                 if replaced is not None:
                     self._add_snapshot(*replaced)
@@ -217,6 +251,14 @@ class SelfPlayCallback(BaseCallback):
             self.logger.record("selfplay/generation", self.generation)
             for key, value in rates.items():
                 self.logger.record(key, value)
+        if self._anchor_goals:
+            games = len(self._anchor_goals)
+            self.logger.record(
+                "selfplay/anchor_goals_for", sum(g[0] for g in self._anchor_goals) / games
+            )
+            self.logger.record(
+                "selfplay/anchor_goals_against", sum(g[1] for g in self._anchor_goals) / games
+            )
         return True
 
     def _add_snapshot(self, score: float | None, elo: float) -> None:
