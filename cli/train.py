@@ -158,11 +158,34 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         raise CliError(str(err)) from None
 
 
+_SWITCH_SPELLING = {
+    "self_play": "--self-play/--no-self-play",
+    "normalize": "--no-normalize",
+    "normalize_reward": "--normalize-reward",
+}
+
+
+def _settings_given(args: argparse.Namespace) -> list[str]:
+    """The options given that a run's own configuration decides (ignored on a resume)."""
+    given = ["ENV_ID"] if args.env_id else []
+    given += [f"--{name.replace('_', '-')}" for name in OPTIONS if getattr(args, name) is not None]
+    given += [_SWITCH_SPELLING[name] for name in SWITCHED if getattr(args, name) is not None]
+    given += [
+        flag for flag, value in (("--env-kwarg", args.env_kwarg), ("--out", args.out)) if value
+    ]
+    return given
+
+
 def run(args: argparse.Namespace) -> int:
     if args.resume and args.config:
         raise CliError(
             f"--config {args.config} with --resume {args.resume}: a run continues with the "
             f"settings in its {CONFIG_FILE}; leave --config out"
+        )
+    if args.resume and (given := _settings_given(args)):
+        raise CliError(
+            f"{', '.join(given)} with --resume {args.resume}: a run continues with the settings "
+            f"in its {CONFIG_FILE}; leave {'it' if len(given) == 1 else 'them'} out"
         )
     if args.backend == BACKEND or (args.resume and read_backend(args.resume) == BACKEND):
         named = args.env_id or args.config

@@ -146,6 +146,15 @@ def config_of(parser, argv):
         ),
         (["train", "Foosball-Block-v0", "--timesteps", "0"], "at least 1"),
         pytest.param(["train", "--resume", "/nonexistent/run"], "no run there", marks=needs_train),
+        (
+            ["train", "--resume", "runs/x", "--timesteps", "100"],
+            "--timesteps with --resume runs/x: a run continues with the settings in its "
+            "config.json; leave it out",
+        ),
+        (
+            ["train", "Foosball-Block-v0", "--resume", "runs/x", "--no-normalize"],
+            "ENV_ID, --no-normalize with --resume runs/x",
+        ),
         pytest.param(["eval", "builtin:nothing"], "no built-in policy", marks=needs_train),
         (["train", "Foosball-Block-v0", "--seed", "-1"], "argument --seed: must be 0 or more"),
         (
