@@ -195,12 +195,12 @@ def show_size(value: Sequence[int]) -> str:
     return "x".join(str(v) for v in value)
 
 
-def scripted(env_id: str, env_kwargs: dict[str, Any]) -> Any:
-    """The scripted baseline of an environment."""
+def scripted(env_id: str, env_kwargs: dict[str, Any], on_table: bool = False) -> Any:
+    """The scripted baseline of an environment (for a table's estimated state: ``on_table``)."""
     from foosball_gym.catalog import scripted_policy
 
     try:
-        return scripted_policy(env_id, env_kwargs)
+        return scripted_policy(env_id, env_kwargs, on_table)
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None
 

@@ -140,7 +140,8 @@ def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
     if args.model == "scripted":
         if not args.env:
             raise CliError("the scripted policy needs --env ENV_ID")
-        return scripted(args.env, env_kwargs), args.env, env_kwargs
+        # A table, simulated or real, is seen through a camera and a filter.
+        return scripted(args.env, env_kwargs, on_table=True), args.env, env_kwargs
     loaded = load_model(args.model, args.trust_model)
     env_id = args.env or loaded.env_id
     if env_id is None:

@@ -17,8 +17,12 @@ def check_env_id(env_id: str) -> None:
         raise ValueError(f"unknown environment {env_id!r}; registered: {known}")
 
 
-def scripted_policy(env_id: str, env_kwargs: dict[str, Any] | None = None) -> Any:
-    """The scripted baseline of the environment ``env_id`` with options ``env_kwargs``.
+def scripted_policy(
+    env_id: str, env_kwargs: dict[str, Any] | None = None, on_table: bool = False
+) -> Any:
+    """The scripted baseline of the environment ``env_id`` with options ``env_kwargs``, for
+    the environment's state or, with ``on_table``, for a table's camera and filter (as with
+    ``estimated_state=True``).
 
     Raises:
         ValueError: ``env_id`` is not registered, or an option has a bad value.
@@ -27,7 +31,8 @@ def scripted_policy(env_id: str, env_kwargs: dict[str, Any] | None = None) -> An
 
     check_env_id(env_id)
     task, options = make_task(env_id, env_kwargs)
-    return task.scripted_policy(interface_of(task, options).builder.names)
+    precise = not (on_table or options.get("estimated_state", False))
+    return task.scripted_policy(interface_of(task, options).builder.names, precise)
 
 
 def describe_envs() -> str:

@@ -277,7 +277,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def scripted_policy(self) -> ScriptedTeam:
         """The scripted baseline for the learner's side of this task."""
-        return self.task.scripted_policy(self.obs_builder.names)
+        return self.task.scripted_policy(self.obs_builder.names, self._estimated is None)
 
     def success(self, goals_for: int, goals_against: int) -> bool:
         """Whether the task is met with this score so far."""

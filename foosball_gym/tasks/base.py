@@ -101,8 +101,12 @@ class Task:
         """Whether the task is met with this score so far."""
         raise NotImplementedError
 
-    def scripted_policy(self, names: list[str]) -> ScriptedTeam:
-        """The scripted baseline for the learner's side, on observations with ``names``."""
+    def scripted_policy(self, names: list[str], precise_state: bool = True) -> ScriptedTeam:
+        """The scripted baseline for the learner's side, on observations with ``names``.
+
+        ``precise_state``: the observation is the simulator's own state, not an estimate from a
+        camera (``estimated_state``, a real or simulated table), so skills that need the ball's
+        path to a millimetre may be used."""
         return ScriptedTeam(names, self.layout.controlled, self.layout.joints)
 
     @classmethod

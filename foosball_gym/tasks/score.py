@@ -86,11 +86,15 @@ class ScoreTask(Task):
             )
         return values
 
-    def scripted_policy(self, names: list[str]) -> ScriptedTeam:
+    def scripted_policy(self, names: list[str], precise_state: bool = True) -> ScriptedTeam:
         """The scripted keeper, deflecting incoming balls to the goal (or striking them where
-        it cannot: blocked ones trickle out of reach) and aiming past the obstacles."""
+        it cannot: blocked ones trickle out of reach) and aiming past the obstacles.
+
+        A deflection needs the ball's path to a millimetre: on an estimated state it scored
+        10 % of incoming balls where the volley scores 49.5 % (200 shots each), so there the
+        keeper volleys."""
         return ScriptedTeam(
-            names, self.layout.controlled, "both", volley=True, aim=True, deflect=True
+            names, self.layout.controlled, "both", volley=True, aim=True, deflect=precise_state
         )
 
     def success(self, goals_for: int, goals_against: int) -> bool:
