@@ -29,6 +29,7 @@ OFFSETS = np.round(np.arange(-0.02, 0.02001, 0.00025), 6)  # ball minus figurine
 # Neighbouring offsets whose directions differ by more than this (degrees) straddle the edge
 # of the foot or a jump between contact facets: no aim is read across them.
 _JUMP = 15.0
+_FLAT = int(np.argmin(np.abs(OFFSETS)))  # the offset 0: the middle of the flat face
 
 
 @cache
@@ -45,10 +46,9 @@ def table_revision() -> int:
 def _offset_on(directions: np.ndarray, target: float) -> float | None:
     """The offset nearest the flat face at which one measured row of directions passes
     ``target`` (degrees), read linearly between neighbouring offsets."""
-    middle = int(np.argmin(np.abs(OFFSETS)))
     best = None
     for step in (-1, 1):
-        k = middle
+        k = _FLAT
         while 0 <= k + step < len(OFFSETS):
             a, b = float(directions[k]), float(directions[k + step])
             if math.isnan(a) or math.isnan(b) or abs(b - a) > _JUMP:

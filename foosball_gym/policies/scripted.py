@@ -151,14 +151,17 @@ class ScriptedTeam:
             target = self.target_y(rod, x, y, vx, vy)
             offset = 0.0
             if self.aim and self._in_reach(rod, x, vx, vy):
-                blockers = [(r.x, r.figurine_y(float(obs[i]))) for r, i in self._blockers]
-                offset = offset_for_angle(plan_shot(x, y, blockers))
+                offset = offset_for_angle(plan_shot(x, y, self._blocker_positions(obs)))
                 target = y - offset
             out.append(slide_for(rod, target) / rod.slide_limit)
             if self.joints == "both":
                 state = None if own is None else (float(obs[own[0]]), float(obs[own[1]]))
                 out.append(self.spin_for(rod, x, y, vx, vy, state, offset) / T.SPIN_LIMIT)
         return np.array(out, dtype=np.float32)
+
+    def _blocker_positions(self, obs: np.ndarray) -> list[tuple[float, tuple[float, ...]]]:
+        """The other team's placed rods: their x and their figurines' y."""
+        return [(r.x, r.figurine_y(float(obs[i]))) for r, i in self._blockers]
 
     def _deflection(
         self, rod: T.Rod, slide: float, x: float, y: float, vx: float, vy: float, obs: np.ndarray
@@ -174,7 +177,7 @@ class ScriptedTeam:
         goal = T.GOAL_LINE_X - rod.x
         want = math.atan2(-cross, goal)
         if self._blockers:
-            blockers = [(r.x, r.figurine_y(float(obs[i]))) for r, i in self._blockers]
+            blockers = self._blocker_positions(obs)
             if clearance(rod.x, cross, want, blockers) <= 0.0:
                 want = plan_shot(rod.x, cross, blockers)
         offset = deflection_offset(math.hypot(vx, vy), math.atan(slope), want)
