@@ -61,7 +61,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "video_every": {"type": positive_int, "metavar": "N"},
 }
 # The boolean fields, set by switches.
-SWITCHED = ("self_play", "normalize", "normalize_reward")
+SWITCHED = ("self_play", "normalize", "normalize_reward", "selfplay_sampled")
 
 
 def add_parser(subparsers: Any) -> None:
@@ -127,6 +127,12 @@ def add_parser(subparsers: Any) -> None:
         default=None,
         help=fields_by_name["normalize_reward"].metadata["help"],
     )
+    p.add_argument(
+        "--selfplay-sampled",
+        action="store_true",
+        default=None,
+        help=fields_by_name["selfplay_sampled"].metadata["help"],
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_rllib_arguments(p)
     p.set_defaults(func=run)
@@ -162,6 +168,7 @@ _SWITCH_SPELLING = {
     "self_play": "--self-play/--no-self-play",
     "normalize": "--no-normalize",
     "normalize_reward": "--normalize-reward",
+    "selfplay_sampled": "--selfplay-sampled",
 }
 
 

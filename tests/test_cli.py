@@ -66,6 +66,8 @@ def test_train_options_show_and_keep_the_defaults_of_the_training_configuration(
     )
     assert (chosen.n_steps, chosen.normalize, chosen.self_play) == (64, False, False)
     assert chosen.batch_size == by_name["batch_size"].default
+    sampled = config_of(parser, ["train", "Foosball-KeeperVsKeeper-v0", "--selfplay-sampled"])
+    assert sampled.selfplay_sampled and not by_name["selfplay_sampled"].default
 
 
 def config_of(parser, argv):

@@ -224,3 +224,35 @@ def test_a_bad_anchor_share_is_refused(share):
     with pytest.raises(ValueError, match="only with an anchor"):
         SelfPlayVecEnv(venv, lambda obs: obs[:, :2] * 0, anchor_share=0.5)
     venv.close()
+
+
+def test_sampled_opponents_explore_as_the_learner_does_and_stay_so_after_a_restart(tmp_path):
+    model = selfplay_model(DummyVecEnv)
+    callback = SelfPlayCallback(
+        window=4, rule="net_score", threshold=-1.0, save_dir=tmp_path, sampled=True
+    )
+    model.learn(1500, callback=callback)
+    assert callback.generation >= 1
+    obs = np.zeros((64, model.observation_space.shape[0]))
+    for snap in callback.pool:
+        assert not snap.deterministic
+        # The same observation gets different actions, spread as the learner's are.
+        actions = snap(obs)
+        assert np.unique(actions[:, 0]).size > 32
+        std = float(np.exp(snap.policy.log_std.detach().numpy()[0]))
+        assert 0.5 * std < actions[:, 0].std() < 1.5 * std
+    restarted = SelfPlayCallback(save_dir=tmp_path, sampled=True)
+    restarted.init_callback(model)
+    restarted._on_training_start()
+    assert [s.generation for s in restarted.pool] == [callback.generation]
+    assert not restarted.pool[0].deterministic
+
+
+def test_opponents_act_on_their_mean_by_default():
+    model = selfplay_model(DummyVecEnv)
+    callback = SelfPlayCallback(window=4, rule="net_score", threshold=-1.0)
+    model.learn(600, callback=callback)
+    snap = callback.pool[-1]
+    assert snap.deterministic
+    actions = snap(np.zeros((8, model.observation_space.shape[0])))
+    assert np.ptp(actions, axis=0).max() == 0.0

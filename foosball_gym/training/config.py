@@ -136,6 +136,11 @@ class TrainConfig:
         "share of self-play games against the scripted opponent instead of a snapshot, in "
         "[0, 1); they do not count towards replacing the opponent",
     )
+    selfplay_sampled: bool = _field(
+        False,
+        "self-play opponents sample their actions as the learner does, instead of acting on "
+        "their policy's mean",
+    )
     eval_freq: int = _field(10_000, "evaluate every this many steps")
     eval_episodes: int = _field(50, "seeded episodes per evaluation")
     checkpoint_freq: int = _field(50_000, "write a checkpoint every this many steps")

@@ -471,6 +471,11 @@ def check_rllib_config(config: TrainConfig, num_workers: int) -> None:
             "the rllib backend plays snapshots only; leave selfplay_scripted_share at 0, or "
             "train with --backend sb3"
         )
+    if config.selfplay_sampled:
+        raise ValueError(
+            "the rllib backend's snapshots act on their policy's mean; leave selfplay_sampled "
+            "off, or train with --backend sb3"
+        )
     if config.video_every is not None:
         raise ValueError(
             "the rllib backend writes no clips; leave video_every out, or record the run "

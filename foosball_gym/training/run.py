@@ -530,6 +530,7 @@ def train(
                 pool_size=config.selfplay_pool,
                 save_dir=out / "selfplay",
                 verbose=1,
+                sampled=config.selfplay_sampled,
             )
         )
     curve = EvalCurveCallback(config, out, wall_offset)

@@ -189,6 +189,10 @@ class SelfPlayCallback(BaseCallback):
             keeps nothing on disk.
         verbose: 1 prints each replacement.
         rule: ``"win_rate"`` or ``"net_score"``.
+        sampled: the opponents sample their actions from their policy, as the learner does,
+            instead of acting on its mean. The rule then weighs like against like: a learner
+            that explores loses to its own deterministic copy (measured: a clone of the
+            scripted keeper, exploring, won 4 and lost 25 of 100 games against itself).
 
     TensorBoard gets the window's rates and ``selfplay/elo``, the learner's rating against its
     opponents (see :class:`~foosball_gym.training.selfplay_rule.ReplacementRule`). Games
@@ -205,12 +209,14 @@ class SelfPlayCallback(BaseCallback):
         save_dir: str | Path | None = None,
         verbose: int = 0,
         rule: str = "win_rate",
+        sampled: bool = False,
     ) -> None:
         super().__init__(verbose)
         if pool_size < 1:
             raise ValueError(f"pool_size must be at least 1, got {pool_size}")
         self.judge = ReplacementRule(rule, threshold, window)
         self.pool_size = pool_size
+        self.sampled = sampled
         self.save_dir = None if save_dir is None else Path(save_dir)
         self.pool: list[PolicySnapshot] = []
         self.history: list[dict[str, Any]] = []
@@ -263,7 +269,9 @@ class SelfPlayCallback(BaseCallback):
 
     def _add_snapshot(self, score: float | None, elo: float) -> None:
         generation = self.generation + 1 if self.pool else 0
-        snap = PolicySnapshot.of_model(self.model, generation=generation)
+        snap = PolicySnapshot.of_model(
+            self.model, generation=generation, deterministic=not self.sampled
+        )
         self.pool = (self.pool + [snap])[-self.pool_size :]
         self.history.append(
             history_record(generation, self.num_timesteps, self.games, self.judge, score, elo)
@@ -286,5 +294,7 @@ class SelfPlayCallback(BaseCallback):
         self.history = json.loads((self.save_dir / "history.json").read_text())
         gens = [h["generation"] for h in self.history][-self.pool_size :]
         self.pool = [PolicySnapshot.load(self.save_dir / f"opponent_{g:04d}.pt") for g in gens]
+        for snap in self.pool:
+            snap.deterministic = not self.sampled
         self.judge.games = self.history[-1]["games"]
         self.judge.opponent_elo = restored_elo(self.history, gens)

@@ -82,7 +82,7 @@ def policy_from_state_dict(state: Mapping[str, Any]) -> Any:
 
 
 class PolicySnapshot:
-    """A frozen policy: raw observations in, deterministic actions in [-1, 1] out.
+    """A frozen policy: raw observations in, actions in [-1, 1] out.
 
     It carries the observation normalisation the policy was trained with (if any), so it acts
     on the environment's raw observations. Called with one observation it returns one action;
@@ -94,6 +94,8 @@ class PolicySnapshot:
         clip_obs, epsilon: ``VecNormalize``'s clipping and epsilon.
         generation: a label (the self-play generation this snapshot was taken at).
         env_id: the environment it was trained on, where known (error messages name it).
+        deterministic: act on the policy's mean (True), or sample from its distribution as the
+            learner does while it trains (False; a self-play opponent's option).
     """
 
     def __init__(
@@ -105,6 +107,7 @@ class PolicySnapshot:
         epsilon: float = 1e-8,
         generation: int = 0,
         env_id: str | None = None,
+        deterministic: bool = True,
     ) -> None:
         # Rebuilt from its constructor arguments and weights (as SB3 saves policies): a deep
         # copy would trip over the tensors a policy keeps from its last forward pass.
@@ -120,6 +123,7 @@ class PolicySnapshot:
         self.epsilon = float(epsilon)
         self.generation = generation
         self.env_id = env_id
+        self.deterministic = deterministic
 
     @property
     def observation_size(self) -> int:
@@ -127,7 +131,9 @@ class PolicySnapshot:
         return int(np.prod(self.policy.observation_space.shape))
 
     @classmethod
-    def of_model(cls, model: Any, generation: int = 0) -> PolicySnapshot:
+    def of_model(
+        cls, model: Any, generation: int = 0, deterministic: bool = True
+    ) -> PolicySnapshot:
         """Snapshot ``model``'s policy with the normalisation of its (VecNormalize) env."""
         from stable_baselines3.common.vec_env import VecNormalize
 
@@ -142,8 +148,9 @@ class PolicySnapshot:
                 env.clip_obs,
                 env.epsilon,
                 generation,
+                deterministic=deterministic,
             )
-        return cls(model.policy, generation=generation)
+        return cls(model.policy, generation=generation, deterministic=deterministic)
 
     def normalise(self, obs: np.ndarray) -> np.ndarray:
         if self.obs_mean is None:
@@ -156,7 +163,7 @@ class PolicySnapshot:
         single = obs.ndim == 1
         batch = self.normalise(obs[None] if single else obs)
         with th.no_grad():
-            actions, _ = self.policy.predict(batch, deterministic=True)
+            actions, _ = self.policy.predict(batch, deterministic=self.deterministic)
         actions = np.clip(actions, -1.0, 1.0).astype(np.float32)
         return actions[0] if single else actions
 
