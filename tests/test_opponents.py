@@ -177,3 +177,44 @@ def test_stagnant_ball_ends_keeper_vs_keeper_as_a_draw():
         assert info["goals_for"] == info["goals_against"] == 0
     finally:
         env.close()
+
+
+def test_continuous_keeper_vs_keeper_serves_again_after_a_dead_ball_and_a_goal():
+    env = gym.make("Foosball-KeeperVsKeeper-v0", continuous=True)
+    try:
+        up = np.array([0.0, -0.25], dtype=np.float32)
+        env.unwrapped.set_opponent(lambda obs: up)
+        env.reset(seed=0, options={"ball_position": (0.0, 0.0), "ball_velocity": (0.0, 0.0)})
+        for step in range(1, 200):  # noqa: B007  (the step that served again is checked)
+            obs, reward, terminated, truncated, info = env.step(up)
+            assert not terminated
+            if info["stagnated"]:
+                break
+        # A dead ball is not a draw: it is served again in front of a keeper.
+        assert step == 60 and reward == 0.0
+        assert abs(abs(obs[-4]) - 0.497) < 0.01 and obs[-2] == obs[-1] == 0.0
+        env.unwrapped.game.sim.place_ball((0.45, 0.07), (3.0, 0.0))
+        for _ in range(40):
+            obs, reward, terminated, truncated, info = env.step(up)
+            assert not terminated
+            if info["goal"]:
+                break
+        assert info["goal"] == 1 and info["goals_for"] == 1 and info["is_success"]
+        assert reward == pytest.approx(1000.0)
+        # The score runs on and the ball is in play again.
+        obs, _, terminated, _, info = env.step(up)
+        assert not terminated and info["goals_for"] == 1 and info["goals_against"] == 0
+        assert abs(abs(obs[-4]) - 0.497) < 0.01
+    finally:
+        env.close()
+
+
+def test_continuous_keeper_vs_keeper_succeeds_on_being_ahead():
+    task = gym.make("Foosball-KeeperVsKeeper-v0", continuous=True).unwrapped
+    try:
+        assert task.success(2, 1) and not task.success(1, 1) and not task.success(1, 2)
+        single = gym.make("Foosball-KeeperVsKeeper-v0").unwrapped
+        assert single.success(1, 1)
+        single.close()
+    finally:
+        task.close()

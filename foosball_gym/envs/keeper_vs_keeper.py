@@ -45,17 +45,23 @@ class KeeperVsKeeperEnv(FoosballEnv):
     ## Episode End
     Terminated on a goal, when the ball leaves the table, or as a draw when the ball has lain
     still for ``stagnation_steps`` (60, one second); truncated after 1800 steps (30 s).
+    With ``continuous=True`` none of these ends the episode: the ball is served again (the
+    keepers centred, the ball in front of either) and the score runs on for the whole 30 s;
+    success is being ahead then. Two sound keepers mostly draw a single serve; a match gives
+    each many chances.
     ``info``: ``is_success`` (the learner scored), ``goal``, ``goals_for``,
     ``goals_against``, ``stagnated``.
 
     ## Arguments
-    ``opponent`` (default: the scripted keeper), ``stagnation_steps`` and every keyword of
+    ``continuous``, ``opponent`` (default: the scripted keeper), ``stagnation_steps`` and
+    every keyword of
     :class:`FoosballEnv`. ``set_opponent(policy)`` swaps the opponent between episodes.
 
     ## Version History
     - v0: first version.
     - v0, physics revision 2: the faithful table (README, "The simulated table");
       ``control_hz`` replaces ``substeps``.
+    - v0: ``continuous``, a match of many serves.
     """
 
     task_class = KeeperVsKeeperTask

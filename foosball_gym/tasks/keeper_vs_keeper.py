@@ -7,20 +7,26 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
+from foosball_gym.interface.observations import check_flag
 from foosball_gym.interface.task import Layout
 from foosball_gym.tasks.base import Start, Task
 from foosball_gym.tasks.serves import resting_in_front_of
 
 
 class KeeperVsKeeperTask(Task):
-    """The two keepers; the ball starts at rest in front of one. Success is scoring."""
+    """The two keepers; the ball starts at rest in front of one. Success is scoring (in a
+    continuous match: being ahead)."""
 
-    options = {"opponent_prismatic_only": (True, False)}
+    options = {"opponent_prismatic_only": (True, False), "continuous": (False, True)}
     # The real table's camera sees only where the opponent's rod is slid to; a ball lying
     # still for a second is a draw.
     env_defaults = {"opponent_prismatic_only": True, "stagnation_steps": 60}
 
-    def __init__(self) -> None:
+    def __init__(self, *, continuous: bool = False) -> None:
+        # A match of many serves: two sound keepers rarely score, so one serve a game leaves
+        # most games drawn and tells little about which keeper is better.
+        self.continuous = check_flag("continuous", continuous)
+        self.continues_after_goal = self.continuous
         self.layout = Layout(controlled=("home_keeper",), joints="both", opponent=("away_keeper",))
 
     def sample_start(
@@ -38,4 +44,6 @@ class KeeperVsKeeperTask(Task):
         return Start([0.0, 0.0], [0.0, 0.0], position, velocity)
 
     def success(self, goals_for: int, goals_against: int) -> bool:
+        if self.continuous:
+            return goals_for > goals_against
         return goals_for > 0
