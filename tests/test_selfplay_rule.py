@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -11,6 +12,7 @@ from foosball_gym.training.selfplay_rule import (
     ReplacementRule,
     performance_elo,
     restored_elo,
+    sign_test,
 )
 
 WIN, DRAW, LOSS = 1, 0, -1
@@ -66,6 +68,43 @@ def test_winning_rule_asks_for_the_win_rate_and_a_lead():
     assert play(ReplacementRule("winning", 0.2, window=100), [WIN] * 10 + [DRAW] * 90) == []
 
 
+def test_sign_test_is_the_binomial_tail():
+    # 9 or more heads in 10 fair tosses: (10 + 1) / 1024.
+    assert sign_test(9, 1) == pytest.approx(11 / 1024)
+    assert sign_test(0, 0) == 1.0 and sign_test(0, 5) == 1.0
+    assert sign_test(5, 5) > 0.5
+
+
+def test_significant_rule_replaces_only_beyond_chance():
+    # 14 of 20 decisive games among draws: p = 0.058, not below 0.05.
+    level = [WIN] * 14 + [LOSS] * 6 + [DRAW] * 20
+    assert play(ReplacementRule("significant", 0.05, window=40), level) == []
+    ahead = [WIN] * 15 + [LOSS] * 5 + [DRAW] * 20
+    fired = play(ReplacementRule("significant", 0.05, window=40), ahead)
+    assert [n for n, *_ in fired] == [40]
+    assert fired[0][1] == pytest.approx(sign_test(15, 5))
+    # The paper's rule would replace on the level games, where chance explains the lead.
+    assert [n for n, *_ in play(ReplacementRule("win_rate", 0.2, window=40), level)] == [40]
+
+
+def test_significant_rule_judges_each_window_once():
+    # A verdict against replacing empties the window: game 80 judges games 41-80 alone, and
+    # no game in between is judged on a window that still holds the first block.
+    rule = ReplacementRule("significant", 0.05, window=40)
+    games = [LOSS] * 20 + [DRAW] * 20 + [WIN] * 16 + [LOSS] * 4 + [DRAW] * 20
+    fired = play(rule, games)
+    assert [n for n, *_ in fired] == [80]
+    assert rule.rates() == {}
+
+
+def test_under_equal_play_the_significant_rule_replaces_at_about_its_level():
+    rng = np.random.default_rng(0)
+    games = rng.choice([WIN, DRAW, LOSS], size=40 * 500).tolist()
+    fired = play(ReplacementRule("significant", 0.05, window=40), games)
+    # A sign test on ~27 decisive games is conservative: at most 5 % of 500 verdicts.
+    assert len(fired) <= 0.05 * 500
+
+
 @pytest.mark.parametrize(
     "rule, threshold",
     [
@@ -74,6 +113,8 @@ def test_winning_rule_asks_for_the_win_rate_and_a_lead():
         ("win_rate", 1.5),
         ("win_rate", math.nan),
         ("net_score", 1.0),
+        ("significant", 0.5),
+        ("significant", 0.0),
         ("elo", 0.2),
     ],
 )
@@ -118,6 +159,24 @@ def test_self_play_trains_without_the_still_ball_draw_unless_asked():
     scripted = TrainConfig("Foosball-KeeperVsKeeper-v0", self_play=False)
     scripted.check()
     assert "stagnation_steps" not in scripted.env_kwargs
+    # A continuous match serves a still ball again: the rule that does so stays.
+    match = TrainConfig("Foosball-KeeperVsKeeper-v0", env_kwargs={"continuous": True})
+    match.check()
+    assert "stagnation_steps" not in match.env_kwargs
+    assert gym.make(match.env_id, **match.env_kwargs).unwrapped.game.stagnation_steps == 60
+
+
+def test_each_rule_takes_its_own_default_threshold():
+    from foosball_gym.training.config import TrainConfig
+
+    for rule, threshold in (("win_rate", 0.2), ("winning", 0.2), ("significant", 0.05)):
+        config = TrainConfig("Foosball-KeeperVsKeeper-v0", selfplay_rule=rule)
+        config.check()
+        assert config.selfplay_threshold == threshold
+    with pytest.raises(ValueError, match="test level"):
+        TrainConfig(
+            "Foosball-KeeperVsKeeper-v0", selfplay_rule="significant", selfplay_threshold=0.6
+        ).check()
 
 
 def test_a_run_from_before_the_rule_was_an_option_keeps_the_net_score(tmp_path):

@@ -20,7 +20,7 @@ from foosball_gym.catalog import check_env_id
 from foosball_gym.registration import __version__
 from foosball_gym.table import PHYSICS_REVISION
 from foosball_gym.training.files import atomic_write_text
-from foosball_gym.training.selfplay_rule import check_rule
+from foosball_gym.training.selfplay_rule import check_rule, default_threshold
 
 ALGORITHMS = ("ppo", "sac")
 VEC_ENV_KINDS = ("dummy", "subproc")
@@ -126,10 +126,16 @@ class TrainConfig:
         "win_rate",
         "when self-play replaces its opponent: win_rate (the paper's: the learner wins at "
         "least the threshold of the window's games), net_score ((wins - losses) / games "
-        "above it) or winning (the win rate, and more wins than losses)",
+        "above it), winning (the win rate, and more wins than losses) or significant (the "
+        "wins among decisive games pass a one-sided sign test at the threshold's level, "
+        "e.g. 0.05)",
     )
     selfplay_window: int = _field(100, "games the self-play rule judges")
-    selfplay_threshold: float = _field(0.2, "the self-play rule's threshold")
+    selfplay_threshold: float | None = _field(
+        None,
+        "the self-play rule's threshold (default 0.2; for significant, the test's level, "
+        "default 0.05)",
+    )
     selfplay_pool: int = _field(1, "draw opponents from this many latest snapshots")
     selfplay_scripted_share: float = _field(
         0.0,
@@ -202,6 +208,8 @@ class TrainConfig:
             raise ValueError(f"clip_range must be a positive number, got {self.clip_range}")
         if not math.isfinite(self.log_std_init):
             raise ValueError(f"log_std_init must be a finite number, got {self.log_std_init}")
+        if self.selfplay_threshold is None:
+            self.selfplay_threshold = default_threshold(self.selfplay_rule)
         check_rule(self.selfplay_rule, self.selfplay_threshold)
         if self.lr_schedule not in LR_SCHEDULES:
             raise ValueError(
@@ -229,8 +237,10 @@ class TrainConfig:
             self.self_play = two_player
         if self.self_play:
             # The paper's self-play task has no early draw for a still ball (SPEC §4); written
-            # into env_kwargs so that the run's evaluations play the game it trained on.
-            self.env_kwargs.setdefault("stagnation_steps", 0)
+            # into env_kwargs so that the run's evaluations play the game it trained on. In a
+            # continuous match a still ball is served again, not drawn: that rule stays.
+            if not self.env_kwargs.get("continuous"):
+                self.env_kwargs.setdefault("stagnation_steps", 0)
 
     def save(self, path: Path) -> None:
         """Write the configuration with the record of the physics it is about to train on.

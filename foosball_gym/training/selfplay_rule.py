@@ -10,6 +10,11 @@ games are drawn, which is what two good keepers mostly play. The ``winning`` rul
 both a win rate of ``threshold`` and more wins than losses: under the paper's rule alone a
 learner that loses as often as it wins still replaces its opponent, and generations churn
 without getting stronger (measured: 47 generations within about 70 Elo of the first).
+The ``significant`` rule asks that the learner beats its opponents beyond chance: among the
+window's decisive games its wins must be more than a fair coin gives at the one-sided level
+``threshold`` (a sign test). It judges the window once, when full, and then starts it anew
+whatever the verdict, so that the level holds for each verdict; a sliding window judged after
+every game would replace on chance far more often than the level says.
 """
 
 from __future__ import annotations
@@ -20,7 +25,14 @@ from typing import Any
 
 import numpy as np
 
-SELFPLAY_RULES = ("win_rate", "net_score", "winning")
+SELFPLAY_RULES = ("win_rate", "net_score", "winning", "significant")
+
+
+def default_threshold(rule: str) -> float:
+    """The threshold a rule takes when none is given: a test level for ``significant``."""
+    if rule not in SELFPLAY_RULES:
+        raise ValueError(f"unknown self-play rule {rule!r}; allowed: {', '.join(SELFPLAY_RULES)}")
+    return 0.05 if rule == "significant" else 0.2
 
 
 def check_rule(rule: str, threshold: float) -> None:
@@ -32,6 +44,19 @@ def check_rule(rule: str, threshold: float) -> None:
         raise ValueError(f"the {rule} rule's threshold must lie in (0, 1], got {threshold}")
     if rule == "net_score" and not -1 <= threshold < 1:
         raise ValueError(f"the net_score rule's threshold must lie in [-1, 1), got {threshold}")
+    if rule == "significant" and not 0 < threshold < 0.5:
+        raise ValueError(
+            f"the significant rule's threshold is a test level and must lie in (0, 0.5), "
+            f"got {threshold}"
+        )
+
+
+def sign_test(wins: int, losses: int) -> float:
+    """The one-sided p-value of ``wins`` or more wins in ``wins + losses`` fair coin tosses."""
+    n = wins + losses
+    if n == 0:
+        return 1.0
+    return sum(math.comb(n, k) for k in range(wins, n + 1)) / 2.0**n
 
 
 def performance_elo(results: np.ndarray, opponent_elo: float) -> float:
@@ -52,7 +77,8 @@ class ReplacementRule:
     Args:
         rule: ``"win_rate"`` (wins / games at least ``threshold``), ``"net_score"``
             ((wins - losses) / games above ``threshold``) or ``"winning"`` (wins / games at
-            least ``threshold`` and more wins than losses).
+            least ``threshold`` and more wins than losses) or ``"significant"`` (the wins
+            among decisive games pass a one-sided sign test at level ``threshold``).
         threshold: see ``rule``.
         window: the last this many games are judged; none is judged before the window is full.
 
@@ -78,6 +104,8 @@ class ReplacementRule:
         res = np.array(self.results)
         if self.rule in ("win_rate", "winning"):
             return float((res > 0).mean())
+        if self.rule == "significant":
+            return sign_test(int((res > 0).sum()), int((res < 0).sum()))
         return float(res.mean())
 
     def elo(self) -> float | None:
@@ -91,7 +119,8 @@ class ReplacementRule:
         rating, else None.
 
         The window starts empty again after a replacement: the games before it were played
-        against the old opponent.
+        against the old opponent. Under the ``significant`` rule it also starts anew after a
+        verdict against replacing (the score is then the test's p-value).
         """
         self.results.append(int(result))
         self.games += 1
@@ -102,6 +131,10 @@ class ReplacementRule:
             due = score >= self.threshold
         elif self.rule == "winning":
             due = score >= self.threshold and sum(self.results) > 0
+        elif self.rule == "significant":
+            due = score < self.threshold
+            if not due:
+                self.results.clear()
         else:
             due = score > self.threshold
         if not due:
