@@ -47,6 +47,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "learning_rate": {"type": positive_number},
     "lr_schedule": {"choices": LR_SCHEDULES},
     "pretrain_episodes": {"type": int, "metavar": "N"},
+    "teacher_steps": {"type": int, "metavar": "N"},
     "target_kl": {"type": float},
     "log_std_init": {"type": float},
     "eval_freq": {"type": positive_int},

@@ -142,6 +142,7 @@ def test_opponent_is_replaced_by_the_rule_both_backends_share(tmp_path):
         ({"video_every": 1000}, "writes no clips"),
         ({"selfplay_scripted_share": 0.2}, "plays snapshots only"),
         ({"selfplay_sampled": True}, "act on their policy's mean"),
+        ({"teacher_steps": 1000}, "no scripted teacher"),
     ],
 )
 def test_what_the_rllib_backend_cannot_train_is_refused(overrides, message):

@@ -122,6 +122,11 @@ class TrainConfig:
     pretrain_episodes: int = _field(
         0, "episodes of the scripted baseline to behaviour-clone before learning"
     )
+    teacher_steps: int = _field(
+        0,
+        "PPO: for this many steps, fit the policy's mean to the scripted baseline's actions on "
+        "the states each rollout visited (DAgger), less and less until then (0: off)",
+    )
     selfplay_rule: str = _field(
         "win_rate",
         "when self-play replaces its opponent: win_rate (the paper's: the learner wins at "
@@ -190,6 +195,17 @@ class TrainConfig:
             )
         if int(self.pretrain_episodes) < 0:
             raise ValueError(f"pretrain_episodes must be 0 or more, got {self.pretrain_episodes}")
+        if int(self.teacher_steps) < 0:
+            raise ValueError(f"teacher_steps must be 0 or more, got {self.teacher_steps}")
+        if self.teacher_steps and self.algo != "ppo":
+            raise ValueError(
+                f"teacher_steps needs PPO (it fits each rollout), not {self.algo}; leave it at 0"
+            )
+        if self.teacher_steps and self.env_kwargs.get("residual"):
+            raise ValueError(
+                "teacher_steps teaches the scripted action itself, while a residual policy "
+                "learns a correction to it; use one or the other"
+            )
         if self.algo == "ppo" and (self.n_steps * self.n_envs < 2 or self.batch_size < 2):
             raise ValueError(
                 "PPO needs n_steps x n_envs and batch_size of at least 2, got "

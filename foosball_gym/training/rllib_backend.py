@@ -466,6 +466,11 @@ def check_rllib_config(config: TrainConfig, num_workers: int) -> None:
         )
     if config.pretrain_episodes:
         raise ValueError("the rllib backend does not pretrain; leave pretrain_episodes at 0")
+    if config.teacher_steps:
+        raise ValueError(
+            "the rllib backend has no scripted teacher; leave teacher_steps at 0, or train "
+            "with --backend sb3"
+        )
     if config.selfplay_scripted_share:
         raise ValueError(
             "the rllib backend plays snapshots only; leave selfplay_scripted_share at 0, or "

@@ -53,6 +53,7 @@ from foosball_gym.training.selfplay import OpponentActionWrapper, SelfPlayCallba
 from foosball_gym.training.signals import SignalStop
 from foosball_gym.training.snapshot import PolicySnapshot
 from foosball_gym.training.storage import NormStats, read_model_zip, read_norm, strip_pickles
+from foosball_gym.training.teacher import TeacherCallback
 
 ALGOS = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
 
@@ -531,6 +532,12 @@ def train(
                 save_dir=out / "selfplay",
                 verbose=1,
                 sampled=config.selfplay_sampled,
+            )
+        )
+    if config.teacher_steps:
+        own.append(
+            TeacherCallback(
+                config.env_id, config.env_kwargs, config.teacher_steps, seed=config.seed
             )
         )
     curve = EvalCurveCallback(config, out, wall_offset)

@@ -1,0 +1,100 @@
+"""Learning from the scripted baseline while PPO trains (DAgger, for Stable-Baselines3 PPO).
+
+Behaviour cloning before training (:mod:`~foosball_gym.training.pretrain`) starts the learner
+where the scripted team is, so its first self-play generations are already as good as that
+team and later ones have nothing easy left to beat. A teacher instead labels the states the
+learner itself visits with the scripted action, and the policy's mean is pulled towards those
+labels after every rollout, less and less until ``steps``: the learner starts from nothing and
+grows into a sound player while it plays its own past copies (and, being fitted on its own
+states, learns to recover from its own mistakes, which cloning demonstrations does not teach).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import VecNormalize
+
+
+class TeacherCallback(BaseCallback):
+    """After each rollout, fit the policy's action mean to the scripted baseline's actions on
+    the rollout's observations, with a weight falling linearly from 1 to 0 at ``steps``.
+
+    Args:
+        env_id, env_kwargs: the learner's environment; its scripted baseline is the teacher.
+        steps: training steps after which the teacher stops.
+        learning_rate: the fitting's step size at weight 1 (scaled by the weight).
+        epochs, batch_size: passes over each rollout, and their minibatch size.
+    """
+
+    def __init__(
+        self,
+        env_id: str,
+        env_kwargs: dict[str, Any],
+        steps: int,
+        learning_rate: float = 1e-3,
+        epochs: int = 4,
+        batch_size: int = 256,
+        seed: int = 0,
+    ) -> None:
+        super().__init__()
+        if steps < 1:
+            raise ValueError(f"the teacher's steps must be at least 1, got {steps}")
+        env = gym.make(env_id, **env_kwargs)
+        try:
+            self.teacher = env.unwrapped.scripted_policy()
+        finally:
+            env.close()
+        self.steps = int(steps)
+        self.learning_rate = float(learning_rate)
+        self.epochs, self.batch_size = int(epochs), int(batch_size)
+        self._gen = th.Generator().manual_seed(seed)
+        self._optimizer: th.optim.Optimizer | None = None
+        self.last_mse: float | None = None
+
+    def weight(self, timesteps: int) -> float:
+        """How much the teacher counts after ``timesteps`` steps of training."""
+        return max(0.0, 1.0 - timesteps / self.steps)
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        weight = self.weight(self.num_timesteps)
+        if weight <= 0.0:
+            return
+        policy = self.model.policy
+        obs = self.model.rollout_buffer.observations
+        obs = obs.reshape(-1, obs.shape[-1])
+        norm = self.model.get_vec_normalize_env()
+        raw = norm.unnormalize_obs(obs) if isinstance(norm, VecNormalize) and norm.norm_obs else obs
+        labels = np.stack([np.asarray(self.teacher(o), dtype=np.float32) for o in raw])
+        if self._optimizer is None:
+            # The actor only: the value function is PPO's to fit.
+            params = [
+                *policy.mlp_extractor.policy_net.parameters(),
+                *policy.action_net.parameters(),
+            ]
+            self._optimizer = th.optim.Adam(params, lr=self.learning_rate)
+        for group in self._optimizer.param_groups:
+            group["lr"] = self.learning_rate * weight
+        device = policy.device
+        obs_t = th.as_tensor(obs, dtype=th.float32, device=device)
+        act_t = th.as_tensor(labels, dtype=th.float32, device=device)
+        policy.set_training_mode(True)
+        loss = th.tensor(0.0)
+        for _ in range(self.epochs):
+            for idx in th.randperm(len(obs_t), generator=self._gen).split(self.batch_size):
+                latent_pi = policy.mlp_extractor.forward_actor(policy.extract_features(obs_t[idx]))
+                loss = th.mean((policy.action_net(latent_pi) - act_t[idx]) ** 2)
+                self._optimizer.zero_grad()
+                loss.backward()
+                self._optimizer.step()
+        policy.set_training_mode(False)
+        self.last_mse = float(loss.item())
+        self.logger.record("teacher/weight", weight)
+        self.logger.record("teacher/action_mse", self.last_mse)

@@ -1,0 +1,71 @@
+"""The scripted teacher that labels the learner's own states while PPO trains (DAgger)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from foosball_gym.cli import main
+from foosball_gym.training.config import TrainConfig
+from foosball_gym.training.models import load_policy
+from foosball_gym.training.teacher import TeacherCallback
+
+ENV = "Foosball-Block-v0"
+SMALL = ["--n-envs", "2", "--n-steps", "256", "--batch-size", "128", "--no-progress"]
+
+
+def test_the_teacher_counts_less_and_less_until_its_last_step():
+    teacher = TeacherCallback(ENV, {}, steps=1000)
+    assert teacher.weight(0) == 1.0
+    assert teacher.weight(250) == pytest.approx(0.75)
+    assert teacher.weight(1000) == 0.0 and teacher.weight(5000) == 0.0
+    with pytest.raises(ValueError, match="at least 1"):
+        TeacherCallback(ENV, {}, steps=0)
+
+
+def scripted_error(run, episodes=5):
+    """Mean squared gap between the trained policy's actions and the scripted keeper's, on
+    the states the policy itself visits (where DAgger teaches)."""
+    env = gym.make(ENV)
+    teacher = env.unwrapped.scripted_policy()
+    policy = load_policy(run).policy
+    gaps = []
+    for i in range(episodes):
+        obs, _ = env.reset(seed=900 + i)
+        done = False
+        while not done:
+            action = np.asarray(policy(obs), dtype=np.float32)
+            gaps.append(float(np.mean((action - np.asarray(teacher(obs))) ** 2)))
+            obs, _, terminated, truncated, _ = env.step(action)
+            done = terminated or truncated
+    env.close()
+    return float(np.mean(gaps))
+
+
+def train(run, *extra):
+    argv = ["train", ENV, "--timesteps", "6144", "--eval-freq", "6144", "--eval-episodes", "2"]
+    argv += ["--learning-rate", "1e-6", "--seed", "3", "--out", str(run), *SMALL, *extra]
+    assert main(argv) == 0
+
+
+def test_a_learner_taught_on_its_own_states_moves_to_the_scripted_actions(tmp_path):
+    # PPO's own steps are too small to matter here: what moves the policy is the teacher.
+    train(tmp_path / "plain")
+    train(tmp_path / "taught", "--teacher-steps", "100000")
+    plain, taught = scripted_error(tmp_path / "plain"), scripted_error(tmp_path / "taught")
+    assert taught < 0.5 * plain
+    assert TrainConfig.load(tmp_path / "taught" / "config.json").teacher_steps == 100000
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"algo": "sac"}, "needs PPO"),
+        ({"env_kwargs": {"residual": 0.1}}, "one or the other"),
+        ({"teacher_steps": -1}, "0 or more"),
+    ],
+)
+def test_what_the_teacher_cannot_do_is_refused(overrides, message):
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(ENV, **{"teacher_steps": 1000, **overrides}).check()
