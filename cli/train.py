@@ -61,6 +61,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "target_success": {"type": float},
     "video_every": {"type": positive_int, "metavar": "N"},
 }
+DEFAULT_IN_HELP = ("selfplay_threshold",)
 # The boolean fields, set by switches.
 SWITCHED = ("self_play", "normalize", "normalize_reward", "selfplay_sampled")
 
@@ -96,11 +97,9 @@ def add_parser(subparsers: Any) -> None:
     for name, spelling in OPTIONS.items():
         f = fields_by_name[name]
         doc = f.metadata["help"].replace("%", "%%")
-        p.add_argument(
-            f"--{name.replace('_', '-')}",
-            help=f"{doc} ({_shown(f.default)})",
-            **spelling,
-        )
+        # A default that depends on other options is told in the field's own help.
+        shown = "" if name in DEFAULT_IN_HELP else f" ({_shown(f.default)})"
+        p.add_argument(f"--{name.replace('_', '-')}", help=doc + shown, **spelling)
     sp = p.add_mutually_exclusive_group()
     sp.add_argument(
         "--self-play",

@@ -188,7 +188,8 @@ class SelfPlayCallback(BaseCallback):
         save_dir: where snapshots (``opponent_<generation>.pt``) and ``history.json`` go; None
             keeps nothing on disk.
         verbose: 1 prints each replacement.
-        rule: ``"win_rate"`` or ``"net_score"``.
+        rule: ``"win_rate"``, ``"net_score"``, ``"winning"`` or ``"significant"`` (see
+            :class:`~foosball_gym.training.selfplay_rule.ReplacementRule`).
         sampled: the opponents sample their actions from their policy, as the learner does,
             instead of acting on its mean. The rule then weighs like against like: a learner
             that explores loses to its own deterministic copy (measured: a clone of the
