@@ -51,6 +51,13 @@ def add_parser(subparsers: Any) -> None:
         "--no-scripted", action="store_true", help="leave the scripted side out of the league"
     )
     p.add_argument(
+        "--sampled",
+        action="store_true",
+        help="the run's generations and final policy sample their actions, as the opponents "
+        "of a run trained with --selfplay-sampled did, instead of acting on their mean "
+        "(seeded by --seed; --add players too)",
+    )
+    p.add_argument(
         "--env-kwarg",
         action="append",
         metavar="KEY=VALUE",
@@ -80,12 +87,23 @@ def run(args: argparse.Namespace) -> int:
         check_directory("--out", out)
     env_overrides = parse_env_kwargs(args.env_kwarg)
     try:
-        players, config = run_players(args.run, args.generations, trust=args.trust_model)
+        players, config = run_players(
+            args.run, args.generations, trust=args.trust_model, sampled=args.sampled
+        )
     except ValueError as err:
         raise CliError(str(err)) from None
     for spec in args.add:
         loaded = load_model(spec, args.trust_model)
+        if args.sampled:
+            if not hasattr(loaded.policy, "deterministic"):
+                raise CliError(f"{spec} cannot sample its actions (an rllib policy); leave it out")
+            loaded.policy.deterministic = False
         players.append(Player(spec, loaded))
+    if args.sampled:
+        import torch
+
+        # The players' sampling draws from torch's generator: seeded, a league is repeatable.
+        torch.manual_seed(args.seed)
     if not args.no_scripted:
         players.append(Player(SCRIPTED, None))
     env_kwargs = {**config.get("env_kwargs", {}), **env_overrides}

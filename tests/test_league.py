@@ -8,7 +8,14 @@ import json
 import numpy as np
 import pytest
 
-from foosball_gym.training.league import League, Player, pick_generations, rising, run_league
+from foosball_gym.training.league import (
+    League,
+    Player,
+    pick_generations,
+    rising,
+    run_league,
+    run_players,
+)
 
 pytest.importorskip("stable_baselines3")
 
@@ -79,6 +86,22 @@ def test_foosball_league_rates_a_self_play_run(tmp_path, capsys):
     assert report["env_kwargs"]["stagnation_steps"] == 20
     assert len(report["pairs"]) == 15
     assert (run / "league.png").stat().st_size > 0
+
+    # Rated as the stochastic policies a run with sampled opponents played: each player
+    # samples, and the seed makes the league repeatable.
+    players, _ = run_players(run, 2, sampled=True)
+    obs = np.zeros((1, 10), dtype=np.float32)
+    for player in players:
+        actions = np.array([np.asarray(player.policy(obs)).ravel() for _ in range(5)])
+        assert np.ptp(actions, axis=0).max() > 0, player.name
+    mean_only, _ = run_players(run, 2)
+    assert np.ptp([mean_only[0].policy(obs) for _ in range(5)], axis=0).max() == 0
+    sampled = []
+    for _ in range(2):
+        argv = ["league", str(run), "--games", "2", "--generations", "2", "--sampled"]
+        assert main([*argv, "--seed", "1", "--out", str(tmp_path)]) == 0
+        sampled.append(json.loads((tmp_path / "league.json").read_text())["pairs"])
+    assert sampled[0] == sampled[1]
 
 
 def test_foosball_league_needs_a_self_play_run(tmp_path, capsys):

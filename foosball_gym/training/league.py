@@ -282,16 +282,31 @@ def pick_generations(generations: Sequence[int], most: int | None) -> list[int]:
 
 
 def run_players(
-    run_dir: str | Path, most_generations: int | None = None, trust: bool = False
+    run_dir: str | Path,
+    most_generations: int | None = None,
+    trust: bool = False,
+    sampled: bool = False,
 ) -> tuple[list[Player], dict[str, Any]]:
     """The saved generations of a self-play run (at most ``most_generations`` of them) and its
-    final policy, as players, with the run's configuration."""
+    final policy, as players, with the run's configuration.
+
+    ``sampled``: the players sample their actions from their policies, as the opponents of a
+    run trained with ``selfplay_sampled`` did, instead of acting on the mean (SB3 runs only).
+    Such a run's generations were judged and replaced as the stochastic policies they are; a
+    policy's mean can play a different game (measured: the means of one run's generations,
+    which never kicked a ball at each other, drew every game between them 0-0).
+    """
     from foosball_gym.training.models import load_policy
     from foosball_gym.training.rllib_backend import BACKEND, load_rllib_snapshot
     from foosball_gym.training.snapshot import PolicySnapshot
 
     run_dir = Path(run_dir)
     config = read_run(run_dir)
+    if sampled and config.get("backend") == BACKEND:
+        raise ValueError(
+            f"{run_dir} was trained with the rllib backend, whose snapshots act on their mean "
+            "only; rate it without sampling"
+        )
     history = json.loads((run_dir / SELFPLAY_DIR / "history.json").read_text())
     by_generation = {h["generation"]: h for h in history}
     players = []
@@ -303,8 +318,10 @@ def run_players(
             policy = load_rllib_snapshot(path, config)
         else:
             policy = PolicySnapshot.load(path, trust=trust)
+            policy.deterministic = not sampled
         players.append(Player(f"gen {g}", policy, g, by_generation[g].get("timesteps")))
     final = load_policy(run_dir, trust=trust)
+    final.policy.deterministic = not sampled
     timesteps = _final_timesteps(run_dir)
     players.append(Player("final", final, None, timesteps))
     return players, config
