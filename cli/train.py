@@ -82,7 +82,10 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument("--out", metavar="DIR", help="run directory (default runs/ENV-seedN)")
     p.add_argument(
-        "--resume", metavar="DIR", help="continue the run in DIR from its last checkpoint"
+        "--resume",
+        metavar="DIR",
+        help="continue the run in DIR from its last checkpoint (with --timesteps N: on to N "
+        "steps in all, past where the run was to stop)",
     )
     shipped = ", ".join(SHIPPED + name for name in shipped_configs())
     p.add_argument(
@@ -175,7 +178,12 @@ _SWITCH_SPELLING = {
 def _settings_given(args: argparse.Namespace) -> list[str]:
     """The options given that a run's own configuration decides (ignored on a resume)."""
     given = ["ENV_ID"] if args.env_id else []
-    given += [f"--{name.replace('_', '-')}" for name in OPTIONS if getattr(args, name) is not None]
+    # --timesteps with --resume extends the run.
+    given += [
+        f"--{name.replace('_', '-')}"
+        for name in OPTIONS
+        if getattr(args, name) is not None and name != "timesteps"
+    ]
     given += [_SWITCH_SPELLING[name] for name in SWITCHED if getattr(args, name) is not None]
     given += [
         flag for flag, value in (("--env-kwarg", args.env_kwarg), ("--out", args.out)) if value
@@ -195,6 +203,11 @@ def run(args: argparse.Namespace) -> int:
             f"in its {CONFIG_FILE}; leave {'it' if len(given) == 1 else 'them'} out"
         )
     if args.backend == BACKEND or (args.resume and read_backend(args.resume) == BACKEND):
+        if args.resume and args.timesteps is not None:
+            raise CliError(
+                f"--timesteps with --resume {args.resume}: an rllib run continues to the "
+                "steps it was started with"
+            )
         named = args.env_id or args.config
         config = None if args.resume or not named else config_from_args(args)
         return run_from_args(args, config)
@@ -222,7 +235,13 @@ def run(args: argparse.Namespace) -> int:
         out = Path(args.out or f"runs/{config.env_id}-seed{config.seed}")
         check_directory("--out", out)
     try:
-        result = train(config, out, progress_bar=not args.no_progress, resume=bool(args.resume))
+        result = train(
+            config,
+            out,
+            progress_bar=not args.no_progress,
+            resume=bool(args.resume),
+            timesteps=args.timesteps if args.resume else None,
+        )
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None
     except OSError as err:

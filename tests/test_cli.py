@@ -149,8 +149,8 @@ def config_of(parser, argv):
         (["train", "Foosball-Block-v0", "--timesteps", "0"], "at least 1"),
         pytest.param(["train", "--resume", "/nonexistent/run"], "no run there", marks=needs_train),
         (
-            ["train", "--resume", "runs/x", "--timesteps", "100"],
-            "--timesteps with --resume runs/x: a run continues with the settings in its "
+            ["train", "--resume", "runs/x", "--n-envs", "4"],
+            "--n-envs with --resume runs/x: a run continues with the settings in its "
             "config.json; leave it out",
         ),
         (

@@ -145,6 +145,26 @@ def test_an_interrupted_run_resumes_from_its_last_checkpoint(tmp_path):
     steps = [int(r["timesteps"]) for r in read_curve(run / "eval.csv")]
     assert steps[-1] == 4096 and steps == sorted(steps)
 
+    # A finished run goes on, with --timesteps, past where it was to stop.
+    physics = json.loads((run / "config.json").read_text())["physics"]
+    assert main(["train", "--resume", str(run), "--timesteps", "5120", "--no-progress"]) == 0
+    steps = [int(r["timesteps"]) for r in read_curve(run / "eval.csv")]
+    assert steps[-1] == 5120 and steps == sorted(steps)
+    saved = json.loads((run / "config.json").read_text())
+    assert saved["timesteps"] == 5120 and saved["physics"] == physics
+    with pytest.raises(SystemExit):
+        main(["train", "--resume", str(run), "--timesteps", "4096", "--no-progress"])
+    with pytest.raises(ValueError, match="extends a resumed run"):
+        train(config, tmp_path / "new", timesteps=8192)
+
+
+def test_a_run_whose_learning_rate_decays_over_its_length_is_not_extended(tmp_path):
+    TrainConfig("Foosball-Block-v0", timesteps=4096, lr_schedule="linear").save(
+        tmp_path / "config.json"
+    )
+    with pytest.raises(ValueError, match="start the decay over"):
+        train(None, tmp_path, resume=True, timesteps=8192)
+
 
 def test_evaluation_is_reproducible_and_counts_successes():
     import gymnasium as gym

@@ -428,12 +428,34 @@ class TrainResult:
 _STALE = ("eval.csv", "eval.png", "pretrain.json", BEST_DIR, "selfplay", VIDEO_DIR)
 
 
+def _extended(config: TrainConfig, timesteps: int, out: Path) -> TrainConfig:
+    """``config`` with its run lengthened to ``timesteps``, and its ``config.json`` saying so
+    (the rest of the file, the physics it was trained on included, is kept)."""
+    if timesteps <= config.timesteps:
+        raise ValueError(
+            f"the run in {out} trains {config.timesteps} steps; a resume can only extend it, "
+            f"not to {timesteps}"
+        )
+    if config.lr_schedule != "constant":
+        raise ValueError(
+            f"the run in {out} decays its learning rate to 0 over {config.timesteps} steps "
+            f"(lr_schedule {config.lr_schedule}); a longer run would start the decay over: "
+            "resume it as it is, or train a new run"
+        )
+    config.timesteps = timesteps
+    data = json.loads((out / CONFIG_FILE).read_text())
+    data["timesteps"] = timesteps
+    atomic_write_text(out / CONFIG_FILE, json.dumps(data, indent=2))
+    return config
+
+
 def train(
     config: TrainConfig,
     out: str | Path,
     progress_bar: bool = False,
     resume: bool = False,
     callbacks: list[BaseCallback] | None = None,
+    timesteps: int | None = None,
 ) -> TrainResult:
     """Train (or, with ``resume``, continue) the run in directory ``out``.
 
@@ -451,10 +473,17 @@ def train(
         progress_bar: show SB3's progress bar.
         resume: continue from the last checkpoint in ``out`` (or its final model).
         callbacks: extra SB3 callbacks, run after the run's own.
+        timesteps: with ``resume``, train on to this many steps in all, past the run's own
+            ``timesteps`` (written into its ``config.json``), so that a long run can go on
+            over several sittings.
     """
     out = Path(out)
+    if timesteps is not None and not resume:
+        raise ValueError("timesteps extends a resumed run; a new run takes config.timesteps")
     if resume:
         config = TrainConfig.load(out / CONFIG_FILE)
+        if timesteps is not None:
+            config = _extended(config, int(timesteps), out)
         mismatch = physics_mismatch(json.loads((out / CONFIG_FILE).read_text()), f"the run {out}")
         if mismatch:
             # config.json keeps the old revision, so the resumed model goes on warning as well.
