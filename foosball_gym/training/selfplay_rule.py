@@ -76,7 +76,7 @@ class ReplacementRule:
 
     Args:
         rule: ``"win_rate"`` (wins / games at least ``threshold``), ``"net_score"``
-            ((wins - losses) / games above ``threshold``) or ``"winning"`` (wins / games at
+            ((wins - losses) / games above ``threshold``), ``"winning"`` (wins / games at
             least ``threshold`` and more wins than losses) or ``"significant"`` (the wins
             among decisive games pass a one-sided sign test at level ``threshold``).
         threshold: see ``rule``.

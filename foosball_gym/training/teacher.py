@@ -7,6 +7,8 @@ learner itself visits with the scripted action, and the policy's mean is pulled 
 labels after every rollout, less and less until ``steps``: the learner starts from nothing and
 grows into a sound player while it plays its own past copies (and, being fitted on its own
 states, learns to recover from its own mistakes, which cloning demonstrations does not teach).
+What one fitted mean cannot hold is a skill timed over several steps: in keeper against keeper
+the taught means learnt to defend but not to kick a resting ball (README).
 """
 
 from __future__ import annotations
