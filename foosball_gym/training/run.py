@@ -429,8 +429,7 @@ _STALE = ("eval.csv", "eval.png", "pretrain.json", BEST_DIR, "selfplay", VIDEO_D
 
 
 def _extended(config: TrainConfig, timesteps: int, out: Path) -> TrainConfig:
-    """``config`` with its run lengthened to ``timesteps``, and its ``config.json`` saying so
-    (the rest of the file, the physics it was trained on included, is kept)."""
+    """``config`` with its run lengthened to ``timesteps`` (refused where that cannot be)."""
     if timesteps <= config.timesteps:
         raise ValueError(
             f"the run in {out} trains {config.timesteps} steps; a resume can only extend it, "
@@ -443,10 +442,14 @@ def _extended(config: TrainConfig, timesteps: int, out: Path) -> TrainConfig:
             "resume it as it is, or train a new run"
         )
     config.timesteps = timesteps
-    data = json.loads((out / CONFIG_FILE).read_text())
-    data["timesteps"] = timesteps
-    atomic_write_text(out / CONFIG_FILE, json.dumps(data, indent=2))
     return config
+
+
+def _record_extension(config: TrainConfig, out: Path) -> None:
+    """Write a checked extension into ``config.json``, the rest of the file kept."""
+    data = json.loads((out / CONFIG_FILE).read_text())
+    data["timesteps"] = config.timesteps
+    atomic_write_text(out / CONFIG_FILE, json.dumps(data, indent=2))
 
 
 def train(
@@ -493,6 +496,9 @@ def train(
                 stacklevel=2,
             )
     config.check()
+    if timesteps is not None:
+        # Only once the lengthened configuration is known to be sound.
+        _record_extension(config, out)
     th.set_num_threads(config.torch_threads)
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out} is a file, not a run directory")
