@@ -58,6 +58,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "selfplay_threshold": {"type": float},
     "selfplay_pool": {"type": positive_int},
     "selfplay_scripted_share": {"type": float},
+    "selfplay_gate": {"type": int, "metavar": "GAMES"},
     "target_success": {"type": float},
     "video_every": {"type": positive_int, "metavar": "N"},
 }

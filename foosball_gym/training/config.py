@@ -152,6 +152,13 @@ class TrainConfig:
         "self-play opponents sample their actions as the learner does, instead of acting on "
         "their policy's mean",
     )
+    selfplay_gate: int = _field(
+        0,
+        "when the rule grants a replacement, the learner's mean first plays this many games "
+        "against the newest opponent's mean and as many against the scripted side; it stands "
+        "only with more wins than losses, and at least one goal and no fewer than conceded "
+        "against the scripted side (0: off)",
+    )
     eval_freq: int = _field(10_000, "evaluate every this many steps")
     eval_episodes: int = _field(50, "seeded episodes per evaluation")
     checkpoint_freq: int = _field(50_000, "write a checkpoint every this many steps")
@@ -195,6 +202,10 @@ class TrainConfig:
             )
         if int(self.pretrain_episodes) < 0:
             raise ValueError(f"pretrain_episodes must be 0 or more, got {self.pretrain_episodes}")
+        if int(self.selfplay_gate) < 0 or int(self.selfplay_gate) == 1:
+            raise ValueError(
+                f"selfplay_gate must be 0 (off) or at least 2 games, got {self.selfplay_gate}"
+            )
         if int(self.teacher_steps) < 0:
             raise ValueError(f"teacher_steps must be 0 or more, got {self.teacher_steps}")
         if self.teacher_steps and self.algo != "ppo":
@@ -251,6 +262,11 @@ class TrainConfig:
             raise ValueError(f"{self.env_id} has no opponent; self-play needs a two-player task")
         if self.self_play is None:
             self.self_play = two_player
+        if self.selfplay_gate and not self.self_play:
+            raise ValueError(
+                f"selfplay_gate judges self-play's replacements; {self.env_id} trains without "
+                "self-play here"
+            )
         if self.self_play:
             # The paper's self-play task has no early draw for a still ball (SPEC §4); written
             # into env_kwargs so that the run's evaluations play the game it trained on. In a

@@ -481,6 +481,11 @@ def check_rllib_config(config: TrainConfig, num_workers: int) -> None:
             "the rllib backend's snapshots act on their policy's mean; leave selfplay_sampled "
             "off, or train with --backend sb3"
         )
+    if config.selfplay_gate:
+        raise ValueError(
+            "the rllib backend has no gate on its replacements; leave selfplay_gate at 0, or "
+            "train with --backend sb3"
+        )
     if config.video_every is not None:
         raise ValueError(
             "the rllib backend writes no clips; leave video_every out, or record the run "

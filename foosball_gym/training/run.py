@@ -50,6 +50,7 @@ from foosball_gym.training.files import (
 )
 from foosball_gym.training.pretrain import clone, collect
 from foosball_gym.training.selfplay import OpponentActionWrapper, SelfPlayCallback, SelfPlayVecEnv
+from foosball_gym.training.selfplay_gate import ReplacementGate
 from foosball_gym.training.signals import SignalStop
 from foosball_gym.training.snapshot import PolicySnapshot
 from foosball_gym.training.storage import NormStats, read_model_zip, read_norm, strip_pickles
@@ -567,6 +568,11 @@ def train(
                 save_dir=out / "selfplay",
                 verbose=1,
                 sampled=config.selfplay_sampled,
+                gate=(
+                    ReplacementGate(config.env_id, config.env_kwargs, config.selfplay_gate)
+                    if config.selfplay_gate
+                    else None
+                ),
             )
         )
     if config.teacher_steps:

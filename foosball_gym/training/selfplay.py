@@ -29,6 +29,8 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
+from foosball_gym.training.files import NORM_FILE
+from foosball_gym.training.selfplay_gate import ReplacementGate
 from foosball_gym.training.selfplay_rule import ReplacementRule, history_record, restored_elo
 from foosball_gym.training.snapshot import PolicySnapshot
 
@@ -36,6 +38,7 @@ OPPONENT_OBS = "opponent_obs"
 # In the info of a game's last step: the game was against the scripted anchor, not a snapshot.
 AGAINST_ANCHOR = "against_scripted_anchor"
 _ANCHOR = -1  # the pool index that stands for the anchor
+GATE_LOG = "gate.jsonl"
 
 
 class _QueuedAction:
@@ -194,6 +197,11 @@ class SelfPlayCallback(BaseCallback):
             instead of acting on its mean. The rule then weighs like against like: a learner
             that explores loses to its own deterministic copy (measured: a clone of the
             scripted keeper, exploring, won 4 and lost 25 of 100 games against itself).
+        gate: where given, a replacement the rule grants stands only if the learner's mean
+            passes it (:class:`~foosball_gym.training.selfplay_gate.ReplacementGate`). Every
+            verdict is appended to ``gate.jsonl`` and each generation that passed is also
+            saved as a model, ``generation_<generation>.zip`` with its normalisation, which
+            ``foosball eval`` and ``load_policy`` read like any model.
 
     TensorBoard gets the window's rates and ``selfplay/elo``, the learner's rating against its
     opponents (see :class:`~foosball_gym.training.selfplay_rule.ReplacementRule`). Games
@@ -211,6 +219,7 @@ class SelfPlayCallback(BaseCallback):
         verbose: int = 0,
         rule: str = "win_rate",
         sampled: bool = False,
+        gate: ReplacementGate | None = None,
     ) -> None:
         super().__init__(verbose)
         if pool_size < 1:
@@ -218,6 +227,7 @@ class SelfPlayCallback(BaseCallback):
         self.judge = ReplacementRule(rule, threshold, window)
         self.pool_size = pool_size
         self.sampled = sampled
+        self.gate = gate
         self.save_dir = None if save_dir is None else Path(save_dir)
         self.pool: list[PolicySnapshot] = []
         self.history: list[dict[str, Any]] = []
@@ -250,7 +260,7 @@ class SelfPlayCallback(BaseCallback):
                 self._anchor_goals.append((info.get("goals_for", 0), info.get("goals_against", 0)))
             elif done:
                 replaced = self.judge.record(game_result(info))
-                if replaced is not None:
+                if replaced is not None and self._gate_passes():
                     self._add_snapshot(*replaced)
                     self._env.set_pool(self.pool)
         rates = self.judge.rates()
@@ -267,6 +277,30 @@ class SelfPlayCallback(BaseCallback):
                 "selfplay/anchor_goals_against", sum(g[1] for g in self._anchor_goals) / games
             )
         return True
+
+    def _gate_passes(self) -> bool:
+        if self.gate is None:
+            return True
+        learner = PolicySnapshot.of_model(self.model, deterministic=True)
+        verdict = self.gate.judge(learner, self.pool[-1], self.num_timesteps)
+        self.logger.record("selfplay/gate_passed", int(verdict.passed))
+        if self.verbose:
+            print(
+                f"self-play gate at {self.num_timesteps} steps: {verdict.wins} won, "
+                f"{verdict.draws} drawn, {verdict.losses} lost against generation "
+                f"{self.generation}; goals {verdict.scripted_goals_for}:"
+                f"{verdict.scripted_goals_against} against the scripted side: "
+                f"{'passed' if verdict.passed else 'refused'}"
+            )
+        if self.save_dir is not None:
+            self.save_dir.mkdir(parents=True, exist_ok=True)
+            with open(self.save_dir / GATE_LOG, "a") as log:
+                log.write(json.dumps({"generation": self.generation, **verdict.record()}) + "\n")
+        return verdict.passed
+
+    def _on_training_end(self) -> None:
+        if self.gate is not None:
+            self.gate.close()
 
     def _add_snapshot(self, score: float | None, elo: float) -> None:
         generation = self.generation + 1 if self.pool else 0
@@ -286,6 +320,16 @@ class SelfPlayCallback(BaseCallback):
         if self.save_dir is not None:
             self.save_dir.mkdir(parents=True, exist_ok=True)
             snap.save(self.save_dir / f"opponent_{generation:04d}.pt")
+            if self.gate is not None:
+                # Imported here: the training module builds this callback.
+                from foosball_gym.training.run import save_model
+
+                name = f"generation_{generation:04d}"
+                save_model(
+                    self.model,
+                    self.save_dir / f"{name}.zip",
+                    self.save_dir / f"{name}_{NORM_FILE}",
+                )
             tmp = self.save_dir / "history.json.tmp"
             tmp.write_text(json.dumps(self.history, indent=1))
             tmp.replace(self.save_dir / "history.json")
