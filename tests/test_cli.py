@@ -68,6 +68,8 @@ def test_train_options_show_and_keep_the_defaults_of_the_training_configuration(
     assert chosen.batch_size == by_name["batch_size"].default
     sampled = config_of(parser, ["train", "Foosball-KeeperVsKeeper-v0", "--selfplay-sampled"])
     assert sampled.selfplay_sampled and not by_name["selfplay_sampled"].default
+    gated = config_of(parser, ["train", "Foosball-KeeperVsKeeper-v0", "--selfplay-gate", "40"])
+    assert gated.selfplay_gate == 40 and by_name["selfplay_gate"].default == 0
 
 
 def config_of(parser, argv):

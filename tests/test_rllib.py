@@ -143,6 +143,7 @@ def test_opponent_is_replaced_by_the_rule_both_backends_share(tmp_path):
         ({"selfplay_scripted_share": 0.2}, "plays snapshots only"),
         ({"selfplay_sampled": True}, "act on their policy's mean"),
         ({"teacher_steps": 1000}, "no scripted teacher"),
+        ({"selfplay_gate": 40}, "no gate"),
     ],
 )
 def test_what_the_rllib_backend_cannot_train_is_refused(overrides, message):

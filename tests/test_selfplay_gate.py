@@ -1,0 +1,129 @@
+"""The self-play gate: a replacement stands only where the learner's mean earns it."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+import gymnasium as gym  # noqa: E402
+from stable_baselines3.common.vec_env import DummyVecEnv  # noqa: E402
+
+from foosball_gym import load_policy  # noqa: E402
+from foosball_gym.training import PolicySnapshot, SelfPlayCallback  # noqa: E402
+from foosball_gym.training.config import TrainConfig  # noqa: E402
+from foosball_gym.training.selfplay_gate import (  # noqa: E402
+    GateVerdict,
+    ReplacementGate,
+    gate_passes,
+)
+from test_selfplay import ENV, selfplay_model  # noqa: E402
+
+SHORT = {"stagnation_steps": 20}
+
+
+def idle(obs):
+    return np.zeros(2, np.float32)
+
+
+@pytest.mark.parametrize(
+    "wins, losses, goals_for, goals_against, passes",
+    [
+        (3, 1, 2, 2, True),
+        (3, 3, 2, 0, False),  # level with the opponent
+        (1, 2, 5, 0, False),
+        (3, 1, 0, 0, False),  # never scored against the scripted side
+        (3, 1, 1, 2, False),  # beaten by the scripted side
+        (1, 0, 1, 0, True),
+    ],
+)
+def test_the_gate_asks_for_more_wins_and_the_scripted_side_held_with_a_goal(
+    wins, losses, goals_for, goals_against, passes
+):
+    assert gate_passes(wins, losses, goals_for, goals_against) is passes
+
+
+def test_the_gate_plays_the_learner_against_its_opponent_and_the_scripted_side():
+    scripted = gym.make(ENV, **SHORT).unwrapped.scripted_policy()
+    gate = ReplacementGate(ENV, SHORT, games=6)
+    try:
+        strong = gate.judge(scripted, idle, timesteps=0)
+        weak = gate.judge(idle, scripted, timesteps=0)
+    finally:
+        gate.close()
+    assert strong.wins + strong.draws + strong.losses == 6
+    # The scripted keeper beats an idle one, but against itself scores nothing: refused.
+    assert strong.wins > strong.losses and strong.scripted_goals_for == 0
+    assert not strong.passed
+    assert weak.wins == 0 and not weak.passed
+
+
+def test_a_sampling_opponent_is_judged_on_its_mean_and_left_sampling():
+    model = selfplay_model(DummyVecEnv)
+    opponent = PolicySnapshot.of_model(model, deterministic=False)
+    learner = PolicySnapshot.of_model(model, deterministic=True)
+    gate = ReplacementGate(ENV, SHORT, games=4)
+    try:
+        first = gate.judge(learner, opponent, timesteps=100)
+        again = gate.judge(learner, opponent, timesteps=100)
+    finally:
+        gate.close()
+    # Both on the same weights' mean, served alike: the same games, whatever the sampling.
+    assert first == again
+    assert opponent.deterministic is False
+
+
+@pytest.mark.parametrize("games, message", [(1, "at least 2"), (-4, "at least 2")])
+def test_a_gate_of_too_few_games_is_refused(games, message):
+    with pytest.raises(ValueError, match=message):
+        ReplacementGate(ENV, SHORT, games)
+    with pytest.raises(ValueError, match="selfplay_gate"):
+        TrainConfig(ENV, selfplay_gate=games).check()
+
+
+def test_a_gate_needs_self_play():
+    with pytest.raises(ValueError, match="needs self-play|without self-play"):
+        TrainConfig("Foosball-Block-v0", selfplay_gate=10).check()
+
+
+class ScriptedVerdicts:
+    """A gate whose verdicts are given in advance, to watch what the callback does with them."""
+
+    def __init__(self, passes):
+        self.passes = list(passes)
+        self.calls = []
+
+    def judge(self, learner, opponent, timesteps):
+        self.calls.append((learner.deterministic, opponent.generation))
+        ok = self.passes.pop(0) if self.passes else False
+        return GateVerdict(timesteps, 4, 2 if ok else 0, 2, 0, int(ok), 0)
+
+    def close(self):
+        pass
+
+
+# No config.json beside this bare callback's files: the model records no physics.
+@pytest.mark.filterwarnings("ignore::foosball_gym.training.config.PhysicsMismatchWarning")
+def test_a_refused_replacement_keeps_the_opponent_and_a_passed_one_is_saved_as_a_model(
+    tmp_path,
+):
+    model = selfplay_model(DummyVecEnv)
+    gate = ScriptedVerdicts([False, True, False, False])
+    callback = SelfPlayCallback(
+        window=4, rule="net_score", threshold=-1.0, save_dir=tmp_path, gate=gate
+    )
+    model.learn(3000, callback=callback)
+    assert len(gate.calls) >= 4
+    # Only the one verdict that passed made a generation.
+    assert callback.generation == 1
+    assert all(deterministic for deterministic, _ in gate.calls)
+    verdicts = [json.loads(line) for line in (tmp_path / "gate.jsonl").read_text().splitlines()]
+    assert [v["passed"] for v in verdicts[:4]] == [False, True, False, False]
+    assert [v["generation"] for v in verdicts[:3]] == [0, 0, 1]
+    # The generation is a model foosball eval can read, with the snapshot's weights.
+    loaded = load_policy(tmp_path / "generation_0001.zip")
+    assert loaded.policy.parameters_equal(callback.pool[-1].policy)
+    np.testing.assert_allclose(loaded.policy.obs_mean, callback.pool[-1].obs_mean)
