@@ -11,6 +11,7 @@ pytest.importorskip("stable_baselines3")
 
 import gymnasium as gym  # noqa: E402
 from stable_baselines3.common.vec_env import DummyVecEnv  # noqa: E402
+from test_selfplay import ENV, selfplay_model  # noqa: E402
 
 from foosball_gym import load_policy  # noqa: E402
 from foosball_gym.training import PolicySnapshot, SelfPlayCallback  # noqa: E402
@@ -20,7 +21,6 @@ from foosball_gym.training.selfplay_gate import (  # noqa: E402
     ReplacementGate,
     gate_passes,
 )
-from test_selfplay import ENV, selfplay_model  # noqa: E402
 
 SHORT = {"stagnation_steps": 20}
 
@@ -30,23 +30,24 @@ def idle(obs):
 
 
 @pytest.mark.parametrize(
-    "wins, losses, goals_for, goals_against, passes",
+    "wins, losses, learner, opponent, passes",
     [
-        (3, 1, 2, 2, True),
-        (3, 3, 2, 0, False),  # level with the opponent
-        (1, 2, 5, 0, False),
-        (3, 1, 0, 0, False),  # never scored against the scripted side
-        (3, 1, 1, 2, False),  # beaten by the scripted side
-        (1, 0, 1, 0, True),
+        (2, 1, (1, 0), (0, 0), True),
+        (1, 2, (5, 0), (0, 0), False),  # lost more head-to-head
+        (0, 0, (0, 2), (0, 5), True),  # level head-to-head, conceded less to the scripted side
+        (3, 1, (1, 1), (2, 2), False),  # equal goal difference, fewer goals
+        (3, 1, (2, 2), (1, 1), True),  # equal goal difference, more goals
+        (3, 1, (0, 3), (1, 2), False),
+        (0, 0, (0, 0), (0, 0), False),  # a copy of the opponent does not pass
     ],
 )
-def test_the_gate_asks_for_more_wins_and_the_scripted_side_held_with_a_goal(
-    wins, losses, goals_for, goals_against, passes
+def test_the_gate_asks_for_the_duel_held_and_the_scripted_side_played_better(
+    wins, losses, learner, opponent, passes
 ):
-    assert gate_passes(wins, losses, goals_for, goals_against) is passes
+    assert gate_passes(wins, losses, learner, opponent) is passes
 
 
-def test_the_gate_plays_the_learner_against_its_opponent_and_the_scripted_side():
+def test_the_gate_plays_the_duel_and_both_against_the_scripted_side_on_the_same_serves():
     scripted = gym.make(ENV, **SHORT).unwrapped.scripted_policy()
     gate = ReplacementGate(ENV, SHORT, games=6)
     try:
@@ -55,10 +56,14 @@ def test_the_gate_plays_the_learner_against_its_opponent_and_the_scripted_side()
     finally:
         gate.close()
     assert strong.wins + strong.draws + strong.losses == 6
-    # The scripted keeper beats an idle one, but against itself scores nothing: refused.
-    assert strong.wins > strong.losses and strong.scripted_goals_for == 0
-    assert not strong.passed
-    assert weak.wins == 0 and not weak.passed
+    # The scripted keeper beats an idle one and holds itself 0:0, where the idle one concedes.
+    assert strong.wins > strong.losses
+    assert (strong.goals_for, strong.goals_against) == (0, 0)
+    assert strong.opponent_goals_against > 0 and strong.passed
+    # The other way round: the idle learner loses the duel and concedes; refused.
+    assert weak.losses > weak.wins and weak.goals_against > 0
+    assert (weak.opponent_goals_for, weak.opponent_goals_against) == (0, 0)
+    assert not weak.passed
 
 
 def test_a_sampling_opponent_is_judged_on_its_mean_and_left_sampling():
@@ -99,7 +104,7 @@ class ScriptedVerdicts:
     def judge(self, learner, opponent, timesteps):
         self.calls.append((learner.deterministic, opponent.generation))
         ok = self.passes.pop(0) if self.passes else False
-        return GateVerdict(timesteps, 4, 2 if ok else 0, 2, 0, int(ok), 0)
+        return GateVerdict(timesteps, 4, 2 if ok else 0, 2, 0, int(ok), 0, 0, 0)
 
     def close(self):
         pass

@@ -155,9 +155,9 @@ class TrainConfig:
     selfplay_gate: int = _field(
         0,
         "when the rule grants a replacement, the learner's mean first plays this many games "
-        "against the newest opponent's mean and as many against the scripted side; it stands "
-        "only with more wins than losses, and at least one goal and no fewer than conceded "
-        "against the scripted side (0: off)",
+        "against the newest opponent's mean, and both play as many against the scripted side; "
+        "it stands only with no more losses than wins, and a better goal difference than the "
+        "opponent's against the scripted side (0: off)",
     )
     eval_freq: int = _field(10_000, "evaluate every this many steps")
     eval_episodes: int = _field(50, "seeded episodes per evaluation")

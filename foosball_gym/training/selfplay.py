@@ -288,8 +288,9 @@ class SelfPlayCallback(BaseCallback):
             print(
                 f"self-play gate at {self.num_timesteps} steps: {verdict.wins} won, "
                 f"{verdict.draws} drawn, {verdict.losses} lost against generation "
-                f"{self.generation}; goals {verdict.scripted_goals_for}:"
-                f"{verdict.scripted_goals_against} against the scripted side: "
+                f"{self.generation}; against the scripted side goals "
+                f"{verdict.goals_for}:{verdict.goals_against}, generation {self.generation}'s "
+                f"{verdict.opponent_goals_for}:{verdict.opponent_goals_against}: "
                 f"{'passed' if verdict.passed else 'refused'}"
             )
         if self.save_dir is not None:
