@@ -25,7 +25,7 @@ def add_parser(subparsers: Any) -> None:
         help="Elo ratings of a self-play run's generations, round-robin",
         description="Play every saved generation of a self-play run, its final policy, the "
         "scripted side and any --add MODEL against each other, round-robin, and rate them "
-        "(Elo, maximum likelihood, 95 %% bootstrap intervals). Prints the table and writes "
+        "(Elo, maximum likelihood, 95 % bootstrap intervals). Prints the table and writes "
         "league.json and league.png into the run directory (or --out).",
     )
     p.add_argument("run", help="a self-play run directory (foosball train on a two-player task)")

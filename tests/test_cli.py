@@ -44,6 +44,7 @@ def test_every_command_has_help_naming_its_main_options(command, capsys):
     assert out.startswith(f"usage: foosball {command}")
     for option in MAIN_OPTIONS[command]:
         assert option in out, option
+    assert "%%" not in out  # a description is printed as written, not %-formatted
 
 
 def test_train_options_show_and_keep_the_defaults_of_the_training_configuration(
