@@ -5,10 +5,8 @@ Ratings say what self-play's own numbers cannot: each generation only ever met t
 before it, so a rising win rate may be a cycle (A beats B beats C beats A), while a league
 rates every generation against the same field. :mod:`foosball_gym.ratings` fits them.
 
-Each pair plays ``games`` seeded games, half with each side at home; game ``k`` of every pair
-is served with seed ``seed + k``, so all pairs meet the same serves. A game is won by the
-side with more goals when it ends (the env's episode: its goals, its length, and its draw for
-a still ball if the run trained with one).
+Every pair plays the same seeded serves (:mod:`~foosball_gym.training.games`), in the game
+the run trained on (its draw for a still ball too, if it had one).
 """
 
 from __future__ import annotations
@@ -21,7 +19,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from foosball_gym.ratings import Ratings, fit_ratings
@@ -32,35 +29,12 @@ from foosball_gym.training.files import (
     MODEL_FILE,
     atomic_write_text,
 )
+from foosball_gym.training.games import Arena, PairResult, Player, play_pair
 
 SCRIPTED = "scripted"
 SELFPLAY_DIR = "selfplay"
 LEAGUE_JSON = "league.json"
 LEAGUE_PNG = "league.png"
-
-
-@dataclass
-class Player:
-    """One side of the league: ``policy`` maps a (home-side) observation to an action; None
-    is the environment's scripted side."""
-
-    name: str
-    policy: Callable[[np.ndarray], Any] | None
-    generation: int | None = None
-    timesteps: int | None = None
-
-
-@dataclass
-class PairResult:
-    """What ``home`` and ``away`` (indices into the players) scored against each other."""
-
-    a: int
-    b: int
-    wins: int = 0  # a's
-    draws: int = 0
-    losses: int = 0  # b's wins
-    goals_a: int = 0
-    goals_b: int = 0
 
 
 @dataclass
@@ -150,49 +124,6 @@ class League:
         }
 
 
-class _Arena:
-    """One environment for the whole league: its opponent is swapped between games."""
-
-    def __init__(self, env_id: str, env_kwargs: dict[str, Any]) -> None:
-        self.env = gym.make(env_id, **env_kwargs)
-        base = self.env.unwrapped
-        if not getattr(base, "layout", None) or not base.layout.opponent:
-            self.env.close()
-            raise ValueError(f"{env_id} has no opponent: a league needs a two-player task")
-        self.scripted = base.scripted_policy()
-        self.observation_size = int(np.prod(self.env.observation_space.shape))
-
-    def game(self, home: Player, away: Player, seed: int) -> tuple[int, int]:
-        """Goals of ``home`` and ``away`` in one game served with ``seed``."""
-        self.env.unwrapped.set_opponent(away.policy)  # None: the scripted side
-        policy = home.policy or self.scripted
-        obs, info = self.env.reset(seed=seed)
-        done = False
-        while not done:
-            obs, _, terminated, truncated, info = self.env.step(policy(obs))
-            done = terminated or truncated
-        return int(info["goals_for"]), int(info["goals_against"])
-
-    def close(self) -> None:
-        self.env.close()
-
-
-def play_pair(arena: _Arena, a: Player, b: Player, games: int, seed: int) -> PairResult:
-    """``a`` against ``b`` over ``games`` games, ``a`` at home in the even ones."""
-    result = PairResult(-1, -1)
-    for k in range(games):
-        if k % 2 == 0:
-            g_a, g_b = arena.game(a, b, seed + k)
-        else:
-            g_b, g_a = arena.game(b, a, seed + k)
-        result.goals_a += g_a
-        result.goals_b += g_b
-        result.wins += g_a > g_b
-        result.losses += g_b > g_a
-        result.draws += g_a == g_b
-    return result
-
-
 def run_league(
     players: Sequence[Player],
     env_id: str,
@@ -223,7 +154,7 @@ def run_league(
     if anchor not in names:
         raise ValueError(f"anchor {anchor!r} is not a player; players: {', '.join(names)}")
     env_kwargs = dict(env_kwargs or {})
-    arena = _Arena(env_id, env_kwargs)
+    arena = Arena(env_id, env_kwargs)
     try:
         for p in players:
             expected = getattr(p.policy, "observation_size", None)

@@ -53,7 +53,11 @@ from foosball_gym.training.selfplay import OpponentActionWrapper, SelfPlayCallba
 from foosball_gym.training.selfplay_gate import ReplacementGate
 from foosball_gym.training.signals import SignalStop
 from foosball_gym.training.snapshot import PolicySnapshot
-from foosball_gym.training.storage import NormStats, read_model_zip, read_norm, strip_pickles
+from foosball_gym.training.storage import (
+    read_model_zip,
+    read_norm,
+    save_model,
+)
 from foosball_gym.training.teacher import TeacherCallback
 
 ALGOS = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
@@ -392,21 +396,6 @@ class StopOnSignal(SignalStop, BaseCallback):
 
     def _on_step(self) -> bool:
         return self.signum is None
-
-
-def save_model(model: Any, path: Path, norm_path: Path) -> None:
-    """Save the model (and its VecNormalize statistics) through a temporary file each.
-
-    Neither holds a pickle: the zip loses the pickled fields SB3 writes into it (nothing here
-    reads them back) and the statistics are written as numbers.
-    """
-    tmp = path.with_name(path.stem + ".tmp.zip")
-    model.save(tmp)
-    strip_pickles(tmp)
-    tmp.replace(path)
-    norm = model.get_vec_normalize_env()
-    if norm is not None:
-        NormStats.of(norm).save(norm_path)
 
 
 @dataclass

@@ -33,6 +33,7 @@ from foosball_gym.training.files import NORM_FILE
 from foosball_gym.training.selfplay_gate import ReplacementGate
 from foosball_gym.training.selfplay_rule import ReplacementRule, history_record, restored_elo
 from foosball_gym.training.snapshot import PolicySnapshot
+from foosball_gym.training.storage import save_model
 
 OPPONENT_OBS = "opponent_obs"
 # In the info of a game's last step: the game was against the scripted anchor, not a snapshot.
@@ -322,9 +323,6 @@ class SelfPlayCallback(BaseCallback):
             self.save_dir.mkdir(parents=True, exist_ok=True)
             snap.save(self.save_dir / f"opponent_{generation:04d}.pt")
             if self.gate is not None:
-                # Imported here: the training module builds this callback.
-                from foosball_gym.training.run import save_model
-
                 name = f"generation_{generation:04d}"
                 save_model(
                     self.model,

@@ -24,7 +24,7 @@ import copy
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from foosball_gym.training.league import Player, _Arena, play_pair
+from foosball_gym.training.games import Arena, Player, play_pair
 
 # Gate games are served with seeds from here on, offset by the learner's step count, so that
 # no two gates meet the same serves and none meets a league's (seeds 0 onwards).
@@ -89,7 +89,7 @@ class ReplacementGate:
         self.env_id = env_id
         self.env_kwargs = dict(env_kwargs or {})
         self.games = int(games)
-        self._arena: _Arena | None = None
+        self._arena: Arena | None = None
 
     def judge(self, learner: Any, opponent: Any, timesteps: int) -> GateVerdict:
         """Play the learner against ``opponent``, and both against the scripted side.
@@ -97,7 +97,7 @@ class ReplacementGate:
         ``learner`` and ``opponent`` are policy snapshots; copies of them act on the mean.
         """
         if self._arena is None:
-            self._arena = _Arena(self.env_id, self.env_kwargs)
+            self._arena = Arena(self.env_id, self.env_kwargs)
         me = Player("learner", _on_mean(learner))
         them = Player("opponent", _on_mean(opponent))
         scripted = Player("scripted", None)

@@ -189,3 +189,18 @@ def strip_pickles(path: Path) -> None:
                 content = json.dumps(data, indent=4).encode()
             out.writestr(info, content)
     tmp.replace(path)
+
+
+def save_model(model: Any, path: Path, norm_path: Path) -> None:
+    """Save the model (and its VecNormalize statistics) through a temporary file each.
+
+    Neither holds a pickle: the zip loses the pickled fields SB3 writes into it (nothing here
+    reads them back) and the statistics are written as numbers.
+    """
+    tmp = path.with_name(path.stem + ".tmp.zip")
+    model.save(tmp)
+    strip_pickles(tmp)
+    tmp.replace(path)
+    norm = model.get_vec_normalize_env()
+    if norm is not None:
+        NormStats.of(norm).save(norm_path)
