@@ -53,11 +53,7 @@ from foosball_gym.training.selfplay import OpponentActionWrapper, SelfPlayCallba
 from foosball_gym.training.selfplay_gate import ReplacementGate
 from foosball_gym.training.signals import SignalStop
 from foosball_gym.training.snapshot import PolicySnapshot
-from foosball_gym.training.storage import (
-    read_model_zip,
-    read_norm,
-    save_model,
-)
+from foosball_gym.training.storage import read_model_zip, read_norm, save_model
 from foosball_gym.training.teacher import TeacherCallback
 
 ALGOS = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
