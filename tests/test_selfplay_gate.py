@@ -19,6 +19,7 @@ from foosball_gym.training.config import TrainConfig  # noqa: E402
 from foosball_gym.training.selfplay_gate import (  # noqa: E402
     GateVerdict,
     ReplacementGate,
+    _on_mean,
     gate_passes,
 )
 
@@ -48,7 +49,9 @@ def test_the_gate_asks_for_the_duel_held_and_the_scripted_side_played_better(
 
 
 def test_the_gate_plays_the_duel_and_both_against_the_scripted_side_on_the_same_serves():
-    scripted = gym.make(ENV, **SHORT).unwrapped.scripted_policy()
+    env = gym.make(ENV, **SHORT)
+    scripted = env.unwrapped.scripted_policy()
+    env.close()
     gate = ReplacementGate(ENV, SHORT, games=6)
     try:
         strong = gate.judge(scripted, idle, timesteps=0)
@@ -78,6 +81,9 @@ def test_a_sampling_opponent_is_judged_on_its_mean_and_left_sampling():
         gate.close()
     # Both on the same weights' mean, served alike: the same games, whatever the sampling.
     assert first == again
+    obs = np.random.default_rng(0).normal(size=(64, learner.observation_size))
+    np.testing.assert_array_equal(_on_mean(opponent)(obs), learner(obs))
+    assert not np.array_equal(opponent(obs), learner(obs))  # the opponent itself samples
     assert opponent.deterministic is False
 
 
