@@ -48,6 +48,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "lr_schedule": {"choices": LR_SCHEDULES},
     "pretrain_episodes": {"type": int, "metavar": "N"},
     "teacher_steps": {"type": int, "metavar": "N"},
+    "teacher": {"metavar": "scripted|MODEL"},
     "target_kl": {"type": float},
     "log_std_init": {"type": float},
     "eval_freq": {"type": positive_int},

@@ -1,4 +1,5 @@
-"""The scripted teacher that labels the learner's own states while PPO trains (DAgger)."""
+"""The teacher (the scripted baseline or a trained model) that labels the learner's own states
+while PPO trains (DAgger)."""
 
 from __future__ import annotations
 
@@ -24,11 +25,11 @@ def test_the_teacher_counts_less_and_less_until_its_last_step():
         TeacherCallback(ENV, {}, steps=0)
 
 
-def scripted_error(run, episodes=5):
-    """Mean squared gap between the trained policy's actions and the scripted keeper's, on
-    the states the policy itself visits (where DAgger teaches)."""
+def scripted_error(run, episodes=5, teacher=None):
+    """Mean squared gap between the trained policy's actions and the teacher's (by default the
+    scripted keeper's), on the states the policy itself visits (where DAgger teaches)."""
     env = gym.make(ENV)
-    teacher = env.unwrapped.scripted_policy()
+    teacher = teacher or env.unwrapped.scripted_policy()
     policy = load_policy(run).policy
     gaps = []
     for i in range(episodes):
@@ -58,12 +59,41 @@ def test_a_learner_taught_on_its_own_states_moves_to_the_scripted_actions(tmp_pa
     assert TrainConfig.load(tmp_path / "taught" / "config.json").teacher_steps == 100000
 
 
+def test_a_learner_taught_by_a_model_moves_to_that_models_actions(tmp_path):
+    model = load_policy("builtin:block")
+    callback = TeacherCallback(ENV, {}, steps=1000, teacher="builtin:block")
+    obs, _ = gym.make(ENV).reset(seed=5)
+    assert np.array_equal(callback.teacher(obs), model(obs))
+
+    train(tmp_path / "plain")
+    train(tmp_path / "taught", "--teacher-steps", "100000", "--teacher", "builtin:block")
+    plain = scripted_error(tmp_path / "plain", teacher=model)
+    taught = scripted_error(tmp_path / "taught", teacher=model)
+    assert taught < 0.5 * plain
+    assert TrainConfig.load(tmp_path / "taught" / "config.json").teacher == "builtin:block"
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"teacher": "builtin:keeper-vs-keeper"}, "trained on Foosball-KeeperVsKeeper-v0"),
+        ({"teacher": "builtin:block", "env_kwargs": {"joint_velocities": False}}, "size 6, .* size 5"),
+    ],
+)
+def test_a_model_that_cannot_teach_this_learner_is_refused(kwargs, message):
+    env_kwargs = kwargs.pop("env_kwargs", {})
+    with pytest.raises(ValueError, match=message):
+        TeacherCallback(ENV, env_kwargs, steps=1000, **kwargs)
+
+
 @pytest.mark.parametrize(
     "overrides, message",
     [
         ({"algo": "sac"}, "needs PPO"),
         ({"env_kwargs": {"residual": 0.1}}, "one or the other"),
         ({"teacher_steps": -1}, "0 or more"),
+        ({"teacher_steps": 0, "teacher": "builtin:block"}, "only with teacher_steps"),
+        ({"teacher": " "}, "'scripted' or a model"),
     ],
 )
 def test_what_the_teacher_cannot_do_is_refused(overrides, message):

@@ -127,6 +127,12 @@ class TrainConfig:
         "PPO: for this many steps, fit the policy's mean to the scripted baseline's actions on "
         "the states each rollout visited (DAgger), less and less until then (0: off)",
     )
+    teacher: str = _field(
+        "scripted",
+        "who labels the states for teacher_steps: scripted (the task's scripted baseline) or a "
+        "model trained on the same environment (a run dir, a .zip or builtin:NAME), whose mean "
+        "action is the label",
+    )
     selfplay_rule: str = _field(
         "win_rate",
         "when self-play replaces its opponent: win_rate (the paper's: the learner wins at "
@@ -211,6 +217,13 @@ class TrainConfig:
         if self.teacher_steps and self.algo != "ppo":
             raise ValueError(
                 f"teacher_steps needs PPO (it fits each rollout), not {self.algo}; leave it at 0"
+            )
+        if not str(self.teacher).strip():
+            raise ValueError("teacher must be 'scripted' or a model (run dir, .zip, builtin:NAME)")
+        if self.teacher != "scripted" and not self.teacher_steps:
+            raise ValueError(
+                f"teacher {self.teacher!r} teaches only with teacher_steps above 0; set "
+                "teacher_steps or leave teacher at 'scripted'"
             )
         if self.teacher_steps and self.env_kwargs.get("residual"):
             raise ValueError(

@@ -563,7 +563,11 @@ def train(
     if config.teacher_steps:
         own.append(
             TeacherCallback(
-                config.env_id, config.env_kwargs, config.teacher_steps, seed=config.seed
+                config.env_id,
+                config.env_kwargs,
+                config.teacher_steps,
+                seed=config.seed,
+                teacher=config.teacher,
             )
         )
     curve = EvalCurveCallback(config, out, wall_offset)

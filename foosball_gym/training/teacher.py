@@ -1,4 +1,4 @@
-"""Learning from the scripted baseline while PPO trains (DAgger, for Stable-Baselines3 PPO).
+"""Learning from a teacher while PPO trains (DAgger, for Stable-Baselines3 PPO).
 
 Behaviour cloning before training (:mod:`~foosball_gym.training.pretrain`) starts the learner
 where the scripted team is, so its first self-play generations are already as good as that
@@ -7,8 +7,10 @@ learner itself visits with the scripted action, and the policy's mean is pulled 
 labels after every rollout, less and less until ``steps``: the learner starts from nothing and
 grows into a sound player while it plays its own past copies (and, being fitted on its own
 states, learns to recover from its own mistakes, which cloning demonstrations does not teach).
-What one fitted mean cannot hold is a skill timed over several steps: in keeper against keeper
-the taught means learnt to defend but not to kick a resting ball (README).
+The scripted teacher's kick is a timed lift and swing that switches on the rod's spin; a mean
+fitted to it averages the wind-up and the swing and stalls half-raised, so in keeper against
+keeper its taught means learnt to defend but not to kick a resting ball (README). A trained
+model as the teacher gives labels a policy can fit: its own mean is such a policy.
 """
 
 from __future__ import annotations
@@ -21,14 +23,18 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
+from foosball_gym.training.models import load_policy
+
 
 class TeacherCallback(BaseCallback):
-    """After each rollout, fit the policy's action mean to the scripted baseline's actions on
-    the rollout's observations, with a weight falling linearly from 1 to 0 at ``steps``.
+    """After each rollout, fit the policy's action mean to the teacher's actions on the
+    rollout's observations, with a weight falling linearly from 1 to 0 at ``steps``.
 
     Args:
-        env_id, env_kwargs: the learner's environment; its scripted baseline is the teacher.
+        env_id, env_kwargs: the learner's environment.
         steps: training steps after which the teacher stops.
+        teacher: ``"scripted"`` (the environment's scripted baseline) or a model trained on
+            ``env_id`` (a run directory, a ``.zip`` or ``builtin:NAME``), acting on its mean.
         learning_rate: the fitting's step size at weight 1 (scaled by the weight).
         epochs, batch_size: passes over each rollout, and their minibatch size.
     """
@@ -42,13 +48,17 @@ class TeacherCallback(BaseCallback):
         epochs: int = 4,
         batch_size: int = 256,
         seed: int = 0,
+        teacher: str = "scripted",
     ) -> None:
         super().__init__()
         if steps < 1:
             raise ValueError(f"the teacher's steps must be at least 1, got {steps}")
         env = gym.make(env_id, **env_kwargs)
         try:
-            self.teacher = env.unwrapped.scripted_policy()
+            if teacher == "scripted":
+                self.teacher = env.unwrapped.scripted_policy()
+            else:
+                self.teacher = _model_teacher(teacher, env_id, env.observation_space.shape)
         finally:
             env.close()
         self.steps = int(steps)
@@ -100,3 +110,19 @@ class TeacherCallback(BaseCallback):
         self.last_mse = float(loss.item())
         self.logger.record("teacher/weight", weight)
         self.logger.record("teacher/action_mse", self.last_mse)
+
+
+def _model_teacher(spec: str, env_id: str, shape: tuple[int, ...] | None) -> Any:
+    """A trained model as the teacher; refused where it plays another environment or takes
+    other observations than the learner's."""
+    policy = load_policy(spec)
+    if policy.env_id is not None and policy.env_id != env_id:
+        raise ValueError(
+            f"teacher {spec} was trained on {policy.env_id}, not on the learner's {env_id}"
+        )
+    if shape is not None and (policy.observation_size,) != tuple(shape):
+        raise ValueError(
+            f"teacher {spec} takes observations of size {policy.observation_size}, the "
+            f"learner's environment gives size {shape[0]}: train both with the same options"
+        )
+    return policy
