@@ -77,7 +77,10 @@ def test_a_learner_taught_by_a_model_moves_to_that_models_actions(tmp_path):
     "kwargs, message",
     [
         ({"teacher": "builtin:keeper-vs-keeper"}, "trained on Foosball-KeeperVsKeeper-v0"),
-        ({"teacher": "builtin:block", "env_kwargs": {"joint_velocities": False}}, "size 6, .* size 5"),
+        (
+            {"teacher": "builtin:block", "env_kwargs": {"joint_velocities": False}},
+            "size 6, .* size 5",
+        ),
     ],
 )
 def test_a_model_that_cannot_teach_this_learner_is_refused(kwargs, message):

@@ -59,6 +59,8 @@ class TeacherCallback(BaseCallback):
                 self.teacher = env.unwrapped.scripted_policy()
             else:
                 self.teacher = _model_teacher(teacher, env_id, env.observation_space.shape)
+            # A model labels a whole rollout in one pass; the scripted policy one state a time.
+            self._batched = teacher != "scripted"
         finally:
             env.close()
         self.steps = int(steps)
@@ -84,7 +86,10 @@ class TeacherCallback(BaseCallback):
         obs = obs.reshape(-1, obs.shape[-1])
         norm = self.model.get_vec_normalize_env()
         raw = norm.unnormalize_obs(obs) if isinstance(norm, VecNormalize) and norm.norm_obs else obs
-        labels = np.stack([np.asarray(self.teacher(o), dtype=np.float32) for o in raw])
+        if self._batched:
+            labels = np.asarray(self.teacher(raw), dtype=np.float32)
+        else:
+            labels = np.stack([np.asarray(self.teacher(o), dtype=np.float32) for o in raw])
         if self._optimizer is None:
             # The actor only: the value function is PPO's to fit.
             params = [
