@@ -22,8 +22,9 @@ import foosball_gym  # noqa: E402
 from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.evaluation import evaluate, wilson_interval  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
+from foosball_gym.training.curve import read_curve  # noqa: E402
 from foosball_gym.training.models import ModelLoadError, load_policy  # noqa: E402
-from foosball_gym.training.run import read_curve, train  # noqa: E402
+from foosball_gym.training.run import train  # noqa: E402
 
 SMALL = [
     "--n-envs",

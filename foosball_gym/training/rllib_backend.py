@@ -759,7 +759,7 @@ def _append_row(csv_path: Path, row: Mapping[str, Any]) -> None:
 
 def _plot(csv_path: Path, png_path: Path, title: str) -> None:
     try:
-        from foosball_gym.training.run import plot_curve
+        from foosball_gym.training.curve import plot_curve
     except ImportError:  # the plot needs the train extra; the CSV is the record
         return
     plot_curve(csv_path, png_path, title)
