@@ -25,7 +25,7 @@ def test_the_teacher_counts_less_and_less_until_its_last_step():
         TeacherCallback(ENV, {}, steps=0)
 
 
-def scripted_error(run, episodes=5, teacher=None):
+def teacher_gap(run, episodes=5, teacher=None):
     """Mean squared gap between the trained policy's actions and the teacher's (by default the
     scripted keeper's), on the states the policy itself visits (where DAgger teaches)."""
     env = gym.make(ENV)
@@ -50,43 +50,45 @@ def train(run, *extra):
     assert main(argv) == 0
 
 
-def test_a_learner_taught_on_its_own_states_moves_to_the_scripted_actions(tmp_path):
-    # PPO's own steps are too small to matter here: what moves the policy is the teacher.
-    train(tmp_path / "plain")
+@pytest.fixture(scope="module")
+def untaught(tmp_path_factory):
+    """A run that nothing teaches: PPO's own steps are too small to move it, so what moves the
+    taught runs beside it is their teacher."""
+    run = tmp_path_factory.mktemp("teacher") / "plain"
+    train(run)
+    return run
+
+
+def test_a_learner_taught_on_its_own_states_moves_to_the_scripted_actions(tmp_path, untaught):
     train(tmp_path / "taught", "--teacher-steps", "100000")
-    plain, taught = scripted_error(tmp_path / "plain"), scripted_error(tmp_path / "taught")
+    plain, taught = teacher_gap(untaught), teacher_gap(tmp_path / "taught")
     assert taught < 0.5 * plain
     assert TrainConfig.load(tmp_path / "taught" / "config.json").teacher_steps == 100000
 
 
-def test_a_learner_taught_by_a_model_moves_to_that_models_actions(tmp_path):
+def test_a_learner_taught_by_a_model_moves_to_that_models_actions(tmp_path, untaught):
     model = load_policy("builtin:block")
     callback = TeacherCallback(ENV, {}, steps=1000, teacher="builtin:block")
     obs, _ = gym.make(ENV).reset(seed=5)
     assert np.array_equal(callback.teacher(obs), model(obs))
 
-    train(tmp_path / "plain")
     train(tmp_path / "taught", "--teacher-steps", "100000", "--teacher", "builtin:block")
-    plain = scripted_error(tmp_path / "plain", teacher=model)
-    taught = scripted_error(tmp_path / "taught", teacher=model)
+    plain = teacher_gap(untaught, teacher=model)
+    taught = teacher_gap(tmp_path / "taught", teacher=model)
     assert taught < 0.5 * plain
     assert TrainConfig.load(tmp_path / "taught" / "config.json").teacher == "builtin:block"
 
 
 @pytest.mark.parametrize(
-    "kwargs, message",
+    "teacher, env_kwargs, message",
     [
-        ({"teacher": "builtin:keeper-vs-keeper"}, "trained on Foosball-KeeperVsKeeper-v0"),
-        (
-            {"teacher": "builtin:block", "env_kwargs": {"joint_velocities": False}},
-            "size 6, .* size 5",
-        ),
+        ("builtin:keeper-vs-keeper", {}, "trained on Foosball-KeeperVsKeeper-v0"),
+        ("builtin:block", {"joint_velocities": False}, "size 6, .* size 5"),
     ],
 )
-def test_a_model_that_cannot_teach_this_learner_is_refused(kwargs, message):
-    env_kwargs = kwargs.pop("env_kwargs", {})
+def test_a_model_that_cannot_teach_this_learner_is_refused(teacher, env_kwargs, message):
     with pytest.raises(ValueError, match=message):
-        TeacherCallback(ENV, env_kwargs, steps=1000, **kwargs)
+        TeacherCallback(ENV, env_kwargs, steps=1000, teacher=teacher)
 
 
 @pytest.mark.parametrize(

@@ -227,8 +227,8 @@ class TrainConfig:
             )
         if self.teacher_steps and self.env_kwargs.get("residual"):
             raise ValueError(
-                "teacher_steps teaches the scripted action itself, while a residual policy "
-                "learns a correction to it; use one or the other"
+                "teacher_steps teaches the whole action (the scripted one or a model's), while a "
+                "residual policy learns a correction to the scripted one; use one or the other"
             )
         if self.algo == "ppo" and (self.n_steps * self.n_envs < 2 or self.batch_size < 2):
             raise ValueError(
