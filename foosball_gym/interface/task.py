@@ -69,22 +69,27 @@ def residual_action(baseline: Any, scale: float, correction: Any) -> np.ndarray:
 
 def check_action(action: Any, n: int, what: str = "action") -> list[float]:
     """``action`` as ``n`` floats clipped to [-1, 1], or a ValueError saying what is wrong."""
-    try:
-        values = action.tolist() if isinstance(action, np.ndarray) else action
-        flat = np.ravel(values) if not isinstance(values, float) else np.array([values])
-        # float() would take "0.5" and drop an imaginary part: only real numbers are actions.
-        if flat.dtype.kind not in "biuf":
-            raise TypeError
-        values = [float(v) for v in flat]
-    except (TypeError, ValueError):
-        raise ValueError(f"{what} must be {n} number(s) in [-1, 1], got {action!r}") from None
+    if isinstance(action, np.ndarray) and action.dtype.kind in "biuf":
+        # What a policy gives, the common case: one conversion, no copies.
+        values = action.ravel().tolist()
+    else:
+        try:
+            values = action.tolist() if isinstance(action, np.ndarray) else action
+            flat = np.ravel(values) if not isinstance(values, float) else np.array([values])
+            # float() would take "0.5" and drop an imaginary part: only real numbers are
+            # actions.
+            if flat.dtype.kind not in "biuf":
+                raise TypeError
+            values = [float(v) for v in flat]
+        except (TypeError, ValueError):
+            raise ValueError(f"{what} must be {n} number(s) in [-1, 1], got {action!r}") from None
     if len(values) != n:
         raise ValueError(f"{what} must have {n} value(s) in [-1, 1], got {len(values)}: {action!r}")
     out = []
     for v in values:
         if v != v or v in (math.inf, -math.inf):
             raise ValueError(f"{what} must be finite, got {values}")
-        out.append(-1.0 if v < -1.0 else 1.0 if v > 1.0 else v)
+        out.append(-1.0 if v < -1.0 else 1.0 if v > 1.0 else float(v))
     return out
 
 

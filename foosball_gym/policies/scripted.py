@@ -140,7 +140,9 @@ class ScriptedTeam:
                     self._blockers.append((T.rod(f"{T.AWAY}_{role}"), names.index(name)))
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        x, y, vx, vy = (float(obs[i]) for i in self._ball)
+        # Python floats: numpy's scalars cost more to compute with than they save.
+        obs = np.asarray(obs).tolist()
+        x, y, vx, vy = (obs[i] for i in self._ball)
         out = []
         for rod, own in zip(self.rods, self._own):
             if self.deflect and own is not None:
@@ -159,12 +161,19 @@ class ScriptedTeam:
                 out.append(self.spin_for(rod, x, y, vx, vy, state, offset) / T.SPIN_LIMIT)
         return np.array(out, dtype=np.float32)
 
-    def _blocker_positions(self, obs: np.ndarray) -> list[tuple[float, tuple[float, ...]]]:
+    def _blocker_positions(self, obs: Sequence[float]) -> list[tuple[float, tuple[float, ...]]]:
         """The other team's placed rods: their x and their figurines' y."""
         return [(r.x, r.figurine_y(float(obs[i]))) for r, i in self._blockers]
 
     def _deflection(
-        self, rod: T.Rod, slide: float, x: float, y: float, vx: float, vy: float, obs: np.ndarray
+        self,
+        rod: T.Rod,
+        slide: float,
+        x: float,
+        y: float,
+        vx: float,
+        vy: float,
+        obs: Sequence[float],
     ) -> tuple[float, float] | None:
         """Slide and spin actions that deflect a fast ball coming at ``rod`` to the goal, or
         None where this ball is not one to deflect."""
