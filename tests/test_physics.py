@@ -217,13 +217,15 @@ def test_figurine_positions_match_the_collision_shapes():
             sim.step()
         centres = sim.figurine_positions()
         assert centres.shape == (5, 3)
+        # The whole table as it is drawn: every rod posed where its drive has it.
+        view = sim._view_world()
         for c in centres:
             # A ray straight down onto the computed centre hits a rod link, not the table.
-            hit = sim._p.rayTest([c[0], c[1], 0.3], [c[0], c[1], c[2]])[0]
-            assert hit[0] == sim.body and hit[1] >= 0, (c, hit)
+            hit = view.client.rayTest([c[0], c[1], 0.3], [c[0], c[1], c[2]])[0]
+            assert hit[0] == view.body and hit[1] >= 0, (c, hit)
         # And a ray 3 cm beside a figurine (in y) misses it.
         c = centres[0]
-        miss = sim._p.rayTest([c[0], c[1] + 0.03, 0.3], [c[0], c[1] + 0.03, 0.02])[0]
+        miss = view.client.rayTest([c[0], c[1] + 0.03, 0.3], [c[0], c[1] + 0.03, 0.02])[0]
         assert miss[1] == -1
     finally:
         sim.close()

@@ -39,8 +39,7 @@ def test_ball_leaving_the_table_is_penalised_and_ends_the_episode(make_env):
     env = make_env("Foosball-Block-v0", out_of_table_penalty=300.0)
     env.reset(options={"ball_position": (0.2, 0.0), "ball_velocity": (0.0, 0.0)})
     # Throw the ball up through the simulator: nothing in the task does that on its own.
-    sim = env.unwrapped.sim
-    sim._p.resetBaseVelocity(sim.ball, [0.0, 0.0, 3.0], [0.0, 0.0, 0.0])
+    env.unwrapped.sim.place_ball((0.2, 0.0), (0.0, 0.0, 3.0))
     for _ in range(30):
         _, reward, terminated, _, info = env.step([0.0])
         if terminated:

@@ -24,13 +24,19 @@ def imported_modules(path: Path) -> set[str]:
     return names
 
 
-def test_only_the_simulator_module_imports_pybullet():
+def test_only_the_simulator_reaches_pybullet_through_its_bullet_worlds():
     users = sorted(
         str(p.relative_to(PACKAGE))
         for p in PACKAGE.rglob("*.py")
         if {"pybullet", "pybullet_utils"} & imported_modules(p)
     )
-    assert users == ["simulator.py"]
+    assert users == ["bullet_worlds.py"]
+    worlds = sorted(
+        str(p.relative_to(PACKAGE))
+        for p in PACKAGE.rglob("*.py")
+        if "foosball_gym.bullet_worlds" in p.read_text()
+    )
+    assert worlds == ["simulator.py"]
 
 
 def test_importing_the_package_needs_no_torch_and_registers_the_ids():
@@ -200,6 +206,7 @@ BELOW = {
     "foosball_gym.interface": {
         "foosball_gym.envs",
         "foosball_gym.simulator",
+        "foosball_gym.bullet_worlds",
         "foosball_gym.sim_table",
         "foosball_gym.tasks",
         "foosball_gym.game",
@@ -208,6 +215,7 @@ BELOW = {
     "foosball_gym.tasks": {
         "foosball_gym.envs",
         "foosball_gym.simulator",
+        "foosball_gym.bullet_worlds",
         "foosball_gym.sim_table",
         "foosball_gym.game",
         "foosball_gym.training",
@@ -218,23 +226,32 @@ BELOW = {
     "foosball_gym.estimation": {
         "foosball_gym.envs",
         "foosball_gym.simulator",
+        "foosball_gym.bullet_worlds",
         "foosball_gym.training",
     },
-    "foosball_gym.vision": {"foosball_gym.envs", "foosball_gym.simulator", "foosball_gym.training"},
+    "foosball_gym.vision": {
+        "foosball_gym.envs",
+        "foosball_gym.simulator",
+        "foosball_gym.bullet_worlds",
+        "foosball_gym.training",
+    },
     "foosball_gym.hardware": {
         "foosball_gym.envs",
         "foosball_gym.simulator",
+        "foosball_gym.bullet_worlds",
         "foosball_gym.training",
     },
     "foosball_gym.play": {
         "foosball_gym.envs",
         "foosball_gym.simulator",
+        "foosball_gym.bullet_worlds",
         "foosball_gym.game",
         "foosball_gym.training",
     },
     "foosball_gym.policies": {
         "foosball_gym.envs",
         "foosball_gym.simulator",
+        "foosball_gym.bullet_worlds",
         "foosball_gym.training",
     },
 }

@@ -14,7 +14,8 @@ import pytest
 import yourdfpy
 
 from foosball_gym import table as T
-from foosball_gym.simulator import TableSim, urdf_path
+from foosball_gym.bullet_worlds import urdf_path
+from foosball_gym.simulator import TableSim
 
 ROOT = Path(__file__).resolve().parents[1]
 URDF_DIR = ROOT / "urdf"
@@ -123,7 +124,8 @@ def test_committed_urdf_is_what_the_generator_writes():
 def test_urdf_loads_in_pybullet_with_every_rod():
     sim = TableSim([r.name for r in T.RODS])
     try:
-        assert sim._p.getNumJoints(sim.body) == 16  # figurines merged into their rods
+        view = sim._view_world()  # the whole table, as it is drawn
+        assert view.client.getNumJoints(view.body) == 16  # figurines merged into their rods
     finally:
         sim.close()
 
@@ -198,7 +200,8 @@ def test_a_file_planted_under_the_cached_urdf_name_is_not_trusted(tmp_path, monk
     import tempfile
     from pathlib import Path
 
-    from foosball_gym.simulator import TableSim, _urdf_with_rods
+    from foosball_gym.bullet_worlds import urdf_with_rods as _urdf_with_rods
+    from foosball_gym.simulator import TableSim
 
     # A temp folder of this test's own: the shared one's file is in use by other processes.
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
