@@ -203,6 +203,32 @@ def test_torque_control_spins_the_rod_the_right_way(keeper_sim):
     assert foot_x > T.rod("home_keeper").x
 
 
+@pytest.mark.parametrize("spell", ["velocity", "torque"])
+def test_a_position_drive_keeps_its_top_speed_after_a_spell_of_other_control(spell):
+    # Bullet drops a motor's speed clamp on a velocity command (which letting the motors go
+    # for torque control used to be). The ball waits 3 mm in front of the keeper's foot,
+    # within its reach but not in its way, so Bullet moves the keeper throughout.
+    sim = TableSim(["home_keeper"])
+    keeper = T.rod("home_keeper")
+    try:
+        sim.reset(ball_position=(keeper.x + 0.025, 0.0))
+        sim.command(spell, [0.0, 0.0])
+        sim.step()
+        peak, in_bullet = 0.0, 0
+        for k in range(24):
+            sim.place_ball((keeper.x + 0.025, sim.joint_states()[0][0]))
+            # From stop to stop: the drive asks for 12 m/s.
+            sim.command("position", [keeper.slide_limit * (1 if k % 8 < 4 else -1), 0.0])
+            sim.step()
+            if sim._simulated:  # Bullet had the keeper to the end of the step
+                in_bullet += 1
+                peak = max(peak, abs(sim.joint_states()[1][0]))
+    finally:
+        sim.close()
+    assert in_bullet >= 20
+    assert T.SLIDE_MAX_SPEED * 0.9 < peak <= T.SLIDE_MAX_SPEED * (1 + 1e-9)
+
+
 def test_unknown_control_mode_is_rejected(keeper_sim):
     with pytest.raises(ValueError, match="position, velocity, torque"):
         keeper_sim.command("force", [0.0, 0.0])
