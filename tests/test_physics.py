@@ -229,6 +229,30 @@ def test_a_position_drive_keeps_its_top_speed_after_a_spell_of_other_control(spe
     assert T.SLIDE_MAX_SPEED * 0.9 < peak <= T.SLIDE_MAX_SPEED * (1 + 1e-9)
 
 
+def test_a_velocity_drive_gets_no_more_torque_in_fine_steps():
+    # Bullet caps a motor's impulse per step at its force times the step size at the time of
+    # the command; the ball beside the foot (never touched) sets the steps as the rod spins.
+    sim = TableSim(["home_keeper"])
+    keeper = T.rod("home_keeper")
+    try:
+        sim.reset(ball_position=(keeper.x, 0.035))
+        sim.command("velocity", [0.0, T.SPIN_MAX_SPEED])
+        speeds, steps = [], []
+        for _ in range(3):
+            before = sim.physics_steps
+            sim.place_ball((keeper.x, 0.035))
+            sim.step()
+            steps.append(sim.physics_steps - before)
+            speeds.append(sim.joint_states()[1][1])
+        gain = T.SPIN_MAX_TORQUE / sim._drives.mass[1] * sim.control_dt
+    finally:
+        sim.close()
+    assert len(set(steps)) > 1 and max(steps) > 2 * sim.substeps
+    # What 1.41 N m gives the rod in each control step, whatever the steps (give or take
+    # gravity's pull on the figurine: 0.3 %). Sent once at the first step's size, 2.2 times.
+    assert speeds == pytest.approx([gain, 2 * gain, 3 * gain], rel=0.01)
+
+
 def test_unknown_control_mode_is_rejected(keeper_sim):
     with pytest.raises(ValueError, match="position, velocity, torque"):
         keeper_sim.command("force", [0.0, 0.0])
