@@ -174,6 +174,11 @@ def measure(grid: dict, sim_kwargs: dict) -> dict:
     return report
 
 
+def _yes(value: bool | None) -> str:
+    """yes / NO, or a dash where an older probe did not say."""
+    return "-" if value is None else "yes" if value else "NO"
+
+
 def _f(value: float | None, fmt: str) -> str:
     """``value`` formatted, or a dash as wide as the format asks for None."""
     if value is None:
@@ -268,13 +273,16 @@ def render(report: dict) -> str:
     if "swinging_foot" in report:
         lines += [
             "",
-            "(f) A foot spinning at the drive's top speed (tip 22.6 m/s) meets a ball: reported,",
-            "    not required (contact resolution is sized for relative speeds up to 20 m/s)",
-            f"{'ball m/s':>10s} {'kicked':>7s} {'m/s after':>10s} {'behind rod':>11s}",
+            "(f) A foot driven forwards from its wind-up at the drive's top speed (its tip at",
+            "    about 7 m/s by the ball) meets a ball at rest or coming at it: reported, not",
+            "    required",
+            f"{'ball m/s':>10s} {'returned':>9s} {'kicked':>7s} {'m/s after':>10s}"
+            f" {'behind rod':>11s}",
         ]
         for f in report["swinging_foot"]:
+            returned = f.get("returned")
             lines.append(
-                f"{f['ball_speed']:10.1f} {'yes' if f['kicked'] else 'NO':>7s} "
+                f"{f['ball_speed']:10.1f} {_yes(returned):>9s} {_yes(f['kicked']):>7s} "
                 f"{f['speed_after']:10.2f} {'yes' if f['behind'] else 'no':>11s}"
             )
 

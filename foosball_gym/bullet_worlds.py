@@ -232,6 +232,9 @@ class World:
         # physics step are bound once here instead.
         self.step = functools.partial(pybullet.stepSimulation, physicsClientId=cid)
         self.pose = functools.partial(pybullet.getBasePositionAndOrientation, physicsClientId=cid)
+        # A body's bounding box: for the ball, centred on it, and read in half the time of its
+        # pose (which copies 30 kB of state for every body).
+        self.box = functools.partial(pybullet.getAABB, physicsClientId=cid)
         self.velocity = functools.partial(pybullet.getBaseVelocity, physicsClientId=cid)
         self.reset_pose = functools.partial(
             pybullet.resetBasePositionAndOrientation, physicsClientId=cid

@@ -429,18 +429,19 @@ def volley(sim: TableSim, speed: float, angle_deg: float) -> dict:
 
 
 def swinging_foot(sim: TableSim, ball_speed: float) -> dict:
-    """A foot spinning at the drive's top speed meets a ball: is it kicked, or passed through?
+    """A foot swung as hard as its drive can meets a ball: is it kicked, or passed through?
 
-    The keeper spins forwards at full speed (velocity control, 100 pi rad/s, from its feet
-    raised behind the rod) while the ball rolls at ``ball_speed`` along -x at the figurine (or
-    rests in front of it, x = keeper.x + 0.025, at 0). Physics that resolves the contact kicks
-    the ball forwards; a foot that jumped through it in one step leaves it on its way, or
-    behind the rod. Reported, not required: the foot's tip moves at 22.6 m/s, beyond what the
-    contact resolution is sized for.
+    The keeper is driven forwards at the drive's top speed (velocity control, 100 pi rad/s)
+    from its feet raised behind the rod, while the ball rolls at ``ball_speed`` along -x at
+    the figurine (or rests in front of it, x = keeper.x + 0.025, at 0). The drive's torque
+    gets the foot's tip to about 7 m/s by the ball. Physics that resolves the contact sends
+    the ball back forwards; a foot that jumped through it in one step leaves it on its way, or
+    behind the rod. Reported, not required.
 
     Returns:
-        ``kicked``: the ball was last seen moving along +x faster than it came, in front of
-        the rod; ``speed_after``: its speed then (m/s); ``behind``: it ended behind the rod.
+        ``returned``: the ball was last seen moving along +x, in front of the rod; ``kicked``:
+        faster than it came; ``speed_after``: its speed then (m/s); ``behind``: it ended
+        behind the rod.
     """
     start_x = KEEPER.x + 0.025 if ball_speed == 0 else KEEPER.x + 0.025 + ball_speed * 0.03
     sim.reset(
@@ -457,6 +458,7 @@ def swinging_foot(sim: TableSim, ball_speed: float) -> dict:
     x, _, vx, vy = sim.ball_xy()
     sim.command("position", [0.0, 0.0])
     return {
+        "returned": vx > 0 and x > KEEPER.x,
         "kicked": vx > ball_speed and x > KEEPER.x,
         "speed_after": math.hypot(vx, vy),
         "behind": x < KEEPER.x,

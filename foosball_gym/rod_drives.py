@@ -79,6 +79,14 @@ class RodDrives:
         self.upper = [float(v) for v in upper]
         self.gains = [float(g) for g in gains]
         self.erp_rate = float(erp_rate)
+        # Per joint: gravity's pull (per sin of the angle), the end stops, the top speed and
+        # the drive's most acceleration.
+        self._joint = [
+            (pull, lo, hi, top, force / m)
+            for pull, lo, hi, top, force, m in zip(
+                self._pull, self.lower, self.upper, self.max_speed, self.max_force, self.mass
+            )
+        ]
         self.pos = [0.0] * self.n
         self.vel = [0.0] * self.n
         self.mode = "position"
@@ -119,34 +127,45 @@ class RodDrives:
         pos, vel, mode = self.pos, self.vel, self.mode
         for j in joints:
             q, v = pos[j], vel[j]
-            pull, lo, hi, top = self._pull[j], self.lower[j], self.upper[j], self.max_speed[j]
-            most = self.max_force[j] * dt / self.mass[j]  # the most speed one step can add
+            pull, lo, hi, top, accel = self._joint[j]
+            pull *= dt
+            most = accel * dt  # the most speed one step can add
             if mode == "position":
                 gain, target = self.gains[j], self.targets[j]
-            elif mode == "velocity":
-                asked = self.velocity_targets[j]
-            else:
-                push = self.torques[j] / self.mass[j] * dt
-            for _ in range(steps):
-                if pull:
-                    v += pull * math.sin(q) * dt
-                if mode == "position":
+                for _ in range(steps):
+                    if pull:
+                        v += pull * math.sin(q)
                     asked = gain * (target - q)
                     if asked > top:
                         asked = top
                     elif asked < -top:
                         asked = -top
-                if mode == "torque":
-                    v += push
-                elif asked - v > most:
-                    v += most
-                elif asked - v < -most:
-                    v -= most
-                else:
-                    v = asked
-                if q <= lo or q >= hi:
-                    v = self._held(q, v, lo, hi)
-                q += v * dt
+                    if asked - v > most:
+                        v += most
+                    elif asked - v < -most:
+                        v -= most
+                    else:
+                        v = asked
+                    if q <= lo or q >= hi:
+                        v = self._held(q, v, lo, hi)
+                    q += v * dt
+            else:
+                asked = self.velocity_targets[j]
+                push = self.torques[j] / self.mass[j] * dt
+                for _ in range(steps):
+                    if pull:
+                        v += pull * math.sin(q)
+                    if mode == "torque":
+                        v += push
+                    elif asked - v > most:
+                        v += most
+                    elif asked - v < -most:
+                        v -= most
+                    else:
+                        v = asked
+                    if q <= lo or q >= hi:
+                        v = self._held(q, v, lo, hi)
+                    q += v * dt
             pos[j], vel[j] = q, v
 
     def _held(self, q: float, v: float, lo: float, hi: float) -> float:
@@ -167,7 +186,9 @@ class RodDrives:
         A position drive asks for gain * error (clamped to its top speed) and gets there from
         the speed it has, so its speed stays between the two; a velocity drive likewise with
         its target. Under torque control only the drive's top speed bounds it. The slack covers
-        a drive overshooting the speed it asks for, and a ball knocking a rod about.
+        a drive overshooting the speed it asks for; not always a ball knocking a rod about
+        (scripted full games: in 1.3 % of control steps a knocked rod went faster, up to 3.8
+        times), but such a rod is at the ball already, in Bullet, in fine steps.
         """
         now = abs(self.vel[j])
         top = self.max_speed[j]

@@ -36,7 +36,7 @@ import contextlib
 import math
 import os
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -558,9 +558,6 @@ class TableSim:
             # The others go as far as the ball did, to the base step.
             drives.advance(self._parked, base, -(-taken * substeps // steps))
         else:
-            # Rods that cannot meet the ball within the control step need not keep pace with
-            # it step by step: how many base steps each is behind.
-            behind = [0] * n
             result, taken = (NO_GOAL, False), 0
             while taken < substeps and result == (NO_GOAL, False):
                 steps, meeting = self._reach.plan(self._ball(), base, touching)
@@ -568,31 +565,21 @@ class TableSim:
                     # A rod that met the ball earlier in this control step stays in Bullet.
                     keep = [i for i in self._simulated if i in touching and i not in meeting]
                     meeting = tuple(sorted((*meeting, *keep)))
-                self._catch_up(meeting, behind)
                 world = self._simulate(meeting)
                 result, _ = self._advance(world, base, steps, watch=True)
                 self._take_rods()
-                for i in range(n):
-                    if i in self._simulated:
-                        continue
-                    if i in touching:
-                        drives.advance((i, n + i), base)
-                    else:
-                        behind[i] += 1
+                # The rods that may meet the ball later in this control step keep pace with it.
+                waiting = [i for i in touching if i not in meeting]
+                if waiting:
+                    drives.advance([*waiting, *(n + i for i in waiting)], base)
                 taken += 1
-            self._catch_up(range(n), behind)
+            # The rods that cannot meet the ball within the control step, all at once.
+            far = [i for i in range(n) if i not in touching]
+            drives.advance([*far, *(n + i for i in far)], base, taken)
         self._ball_state = self._world.ball_state()
         if self._view is not None:
             self._sync_view()
         return result
-
-    def _catch_up(self, rods: Iterable[int], behind: list[int]) -> None:
-        """Move ``rods`` on by the base steps they are ``behind``."""
-        base = 1.0 / self.physics_hz
-        for i in rods:
-            if behind[i]:
-                self._drives.advance((i, self._n + i), base, behind[i])
-                behind[i] = 0
 
     def _advance(
         self, world: World, duration: float, steps: int, watch: bool
@@ -612,7 +599,7 @@ class TableSim:
             self._send(world, dt)
             if drives.mode == "torque":
                 torques = [drives.torques[j] for j in self._joints]
-        step, pose, ball = world.step, world.pose, world.ball
+        step, box, ball = world.step, world.box, world.ball
         line, half = T.GOAL_LINE_X, T.GOAL_HALF_WIDTH
         if not watch:
             # Without a figurine to kick it, the ball goes no faster than it does now; twice
@@ -630,10 +617,12 @@ class TableSim:
             if torques is not None:
                 world.motors(world.body, self._links, pybullet.TORQUE_CONTROL, forces=torques)
             step()
-            (x, y, z), _ = pose(ball)
-            if (x > line or x < -line) and -half <= y <= half:
+            # Twice the centre: the sum of the ball's bounding box's corners.
+            (x, y, z), (x1, y1, z1) = box(ball)
+            x, y, z = x + x1, y + y1, z + z1
+            if (x > 2 * line or x < -2 * line) and -2 * half <= y <= 2 * half:
                 return ((HOME_SCORED if x > 0 else AWAY_SCORED), False), k + 1
-            if z > T.OUT_OF_TABLE_HEIGHT:
+            if z > 2 * T.OUT_OF_TABLE_HEIGHT:
                 return (NO_GOAL, True), k + 1
         return (NO_GOAL, False), steps
 
