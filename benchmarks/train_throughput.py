@@ -1,7 +1,8 @@
 """Env steps per second of ``foosball train``: the run's own configuration (PPO and every
 default but the length) for an environment, its environments in this process (``dummy``) or
-one process each (``subproc``). Learning, evaluations and checkpoints included, as a run has
-them.
+one process each (``subproc``). Timed from the first rollout to the last update: learning and
+checkpoints included, as a run has them; building the run and evaluating it are not (a full
+game's evaluation is 50 matches of a minute each: more steps than 180,000 of training).
 
     python benchmarks/train_throughput.py [--env ID] [--steps N] [--n-envs N]
                                           [--vec-env dummy subproc] [--against DIR]
@@ -24,15 +25,30 @@ VEC_ENVS = ("dummy", "subproc")
 
 
 def measure(env_id: str, steps: int, n_envs: int, vec_env: str) -> float:
-    """Env steps/s of training ``env_id`` for ``steps`` steps (building the run included)."""
+    """Env steps/s of training ``env_id`` for ``steps`` steps."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
     from foosball_gym.training.config import TrainConfig
     from foosball_gym.training.run import train
 
-    config = TrainConfig(env_id, timesteps=steps, n_envs=n_envs, vec_env=vec_env)
+    class Clock(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.start, self.steps = time.perf_counter(), self.model.num_timesteps
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_training_end(self) -> None:
+            self.rate = (self.model.num_timesteps - self.steps) / (time.perf_counter() - self.start)
+
+    config = TrainConfig(
+        env_id, timesteps=steps, n_envs=n_envs, vec_env=vec_env, eval_freq=steps + 1
+    )
+    config.eval_episodes = 1  # the one evaluation at the end, which is not timed
+    clock = Clock()
     with tempfile.TemporaryDirectory() as out:
-        start = time.perf_counter()
-        train(config, out)
-        return steps / (time.perf_counter() - start)
+        train(config, out, callbacks=[clock])
+    return clock.rate
 
 
 def _measure_in(checkout: str, env_id: str, steps: int, n_envs: int, vec_env: str) -> float:

@@ -247,7 +247,7 @@ class World:
         self.motors = functools.partial(pybullet.setJointMotorControlArray, physicsClientId=cid)
         self.set_engine = functools.partial(pybullet.setPhysicsEngineParameter, physicsClientId=cid)
         p.setGravity(0, 0, -9.81)
-        self.dt = 1.0 / T.PHYSICS_HZ
+        self.dt, self.substeps = 1.0 / T.PHYSICS_HZ, 1
         p.setPhysicsEngineParameter(
             fixedTimeStep=self.dt,
             numSubSteps=0,
@@ -344,11 +344,18 @@ class World:
                 )
                 self.unclamped.discard(link)
 
-    def set_step(self, dt: float) -> None:
-        if dt != self.dt:
-            erp = ERP_RATE * dt
-            self.set_engine(fixedTimeStep=dt, erp=erp, contactERP=erp)
-            self.dt = dt
+    def set_step(self, dt: float, substeps: int = 1) -> None:
+        """Make a step of the world ``dt`` seconds long, taken in ``substeps`` equal physics
+        steps within the one call (the same physics, one call to Bullet instead of several)."""
+        if (dt, substeps) != (self.dt, self.substeps):
+            erp = ERP_RATE * dt / substeps
+            self.set_engine(
+                fixedTimeStep=dt,
+                numSubSteps=substeps if substeps > 1 else 0,
+                erp=erp,
+                contactERP=erp,
+            )
+            self.dt, self.substeps = dt, substeps
 
     def clear(self, base_dt: float) -> None:
         """Step once with the ball alone, high above the table: Bullet forgets what it carries

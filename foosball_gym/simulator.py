@@ -140,7 +140,8 @@ class TableSim:
         self.gui = gui
         self._closed = True
         self._view: World | None = None
-        # The worlds of pairs of rods, made as the ball first comes near them.
+        # The worlds of pairs of neighbouring rods (and, made as the ball first needs them,
+        # of more rods: three, for a kicked ball that may reach both neighbours).
         self._worlds: dict[tuple[str, ...], World] = {}
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
             raise RuntimeError(
@@ -193,6 +194,10 @@ class TableSim:
         # The table and the ball alone: this table's own world.
         self._own = self._world = World(())
         self._apply_dynamics(self._own)
+        # Made now, not as the ball first comes near: each takes 16 ms to make, more than a
+        # table that keeps real time can spare within a control step.
+        for window in self._windows:
+            self._world_of(tuple(self.rods[i].name for i in window))
         # The ball's position, orientation, velocity and spin as the last step left it (None
         # while a world holding it has moved on).
         self._ball_state: tuple | None = (
@@ -351,13 +356,6 @@ class TableSim:
         elif rods != self._simulated:
             self._arrange(world, rods, everything=False)
         return world
-
-    def load_worlds(self) -> None:
-        """Make now the worlds of every pair of neighbouring rods, which are otherwise made
-        when the ball first comes near the pair (16 ms each: more than a table that keeps real
-        time can spare within a control step)."""
-        for window in self._windows:
-            self._world_of(tuple(self.rods[i].name for i in window))
 
     def _world_of(self, names: tuple[str, ...]) -> World:
         world = self._worlds.get(names)
@@ -592,10 +590,10 @@ class TableSim:
             the outcome (see :meth:`step`) and the physics steps taken.
         """
         dt = duration / steps
-        world.set_step(dt)
         drives = self._drives
         torques = None
         if self._joints:
+            world.set_step(dt)  # before the motors are told: Bullet sizes their impulse by it
             self._send(world, dt)
             if drives.mode == "torque":
                 torques = [drives.torques[j] for j in self._joints]
@@ -610,9 +608,15 @@ class TableSim:
         self._ball_state = None
         self.physics_steps += steps
         if not watch and torques is None:
-            for _ in range(steps):
+            if world is self._own and steps == self.substeps:
+                world.set_step(duration, steps)  # the base steps of a control step, at once
                 step()
+            else:
+                world.set_step(dt)
+                for _ in range(steps):
+                    step()
             return (NO_GOAL, False), steps
+        world.set_step(dt)
         for k in range(steps):
             if torques is not None:
                 world.motors(world.body, self._links, pybullet.TORQUE_CONTROL, forces=torques)

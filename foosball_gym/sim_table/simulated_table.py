@@ -134,7 +134,6 @@ class SimulatedTable:
         if not isinstance(stagnation, (int, np.integer)) or stagnation < 0:
             raise ValueError(f"stagnation_steps must be a non-negative integer, got {stagnation!r}")
         self.sim = TableSim(task.layout.rods, **dict(zip(PHYSICS_DEFAULTS, physics)))
-        self.sim.load_worlds()
         self.realtime = bool(realtime)
         self.pace = bool(pace) and not self.realtime
         self._paced_from: float | None = None
