@@ -21,7 +21,7 @@ from collections.abc import Callable
 
 from foosball_gym import physics_probes
 from foosball_gym import table as T
-from foosball_gym.simulator import TableSim
+from foosball_gym.sim import TableSim
 
 FULL = {
     "speeds": (1.5, 3.0, 5.0, 10.0, 15.0, 20.0),

@@ -30,7 +30,7 @@ from foosball_gym.catalog import scripted_policy
 from foosball_gym.evaluation import evaluate, wilson_interval
 from foosball_gym.hardware.safety import SafetyError
 from foosball_gym.play.stack import play_sim
-from foosball_gym.simulator import TableSim
+from foosball_gym.sim import TableSim
 
 ENV = "Foosball-Block-v0"
 

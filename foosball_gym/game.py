@@ -3,7 +3,7 @@
 Both faces of the simulation use it: the Gymnasium environment (:mod:`foosball_gym.envs`),
 which adds actions, observations and rewards, and the simulated real table
 (:mod:`foosball_gym.sim_table`), whose learner's rods are moved by simulated CAN drives
-instead. The game only calls the :class:`~foosball_gym.simulator.TableSim` it is given.
+instead. The game only calls the :class:`~foosball_gym.sim.TableSim` it is given.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.tasks.base import Start, Task, clear_of_ball
 
 if TYPE_CHECKING:
-    from foosball_gym.simulator import TableSim
+    from foosball_gym.sim import TableSim
 
 Policy = Callable[[np.ndarray], Any]
 

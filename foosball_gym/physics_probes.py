@@ -1,6 +1,6 @@
 """Measurements of the simulated table's contacts, each reduced to a few plain numbers.
 
-Every probe takes a :class:`foosball_gym.simulator.TableSim` built by the caller with the home
+Every probe takes a :class:`foosball_gym.sim.TableSim` built by the caller with the home
 keeper in play (``TableSim(["home_keeper"])``; other rods must not be in play), drives it
 through its public control-step API only (``reset``, ``command``, ``step``, ``ball_xy``,
 ``ball_state``, ``joint_states``, ``physics_hz``, ``control_dt``), and never imports pybullet,
@@ -22,7 +22,7 @@ from foosball_gym import table as T
 from foosball_gym.policies.scripted import KICK_ANGLE, WIND_UP_ANGLE
 
 if TYPE_CHECKING:  # only for the hints: importing the simulator would import pybullet
-    from foosball_gym.simulator import TableSim
+    from foosball_gym.sim import TableSim
 
 R = T.BALL_RADIUS
 # Where the ball's centre is when it touches a side wall.

@@ -26,7 +26,7 @@ _sim = None
 def _row(job: tuple[float, float]) -> list[float]:
     global _sim
     if _sim is None:
-        from foosball_gym.simulator import TableSim
+        from foosball_gym.sim import TableSim
 
         _sim = TableSim(["home_keeper"])
     speed, angle = job

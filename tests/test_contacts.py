@@ -12,7 +12,7 @@ import pytest
 
 from foosball_gym import physics_probes as probes
 from foosball_gym import table as T
-from foosball_gym.simulator import TableSim
+from foosball_gym.sim import TableSim
 
 
 @pytest.fixture(scope="module")
@@ -148,10 +148,11 @@ def test_the_drives_never_outrun_the_speed_the_near_contact_test_assumes(monkeyp
 
         def watched_step() -> None:
             step()
-            for j, state in zip(table._joints, world.joint_states(world.body, table._links)):
+            worlds = table._worlds
+            for j, state in zip(worlds.joints, world.joint_states(world.body, worlds.links)):
                 peak[j] = max(peak[j], abs(state[1]))
 
-        if not table._joints:
+        if not table._worlds.joints:
             return simulate(world, duration, steps, watch)
         world.step = watched_step
         try:
@@ -182,7 +183,7 @@ def test_the_drives_never_outrun_the_speed_the_near_contact_test_assumes(monkeyp
             ]
             peak[:] = [0.0] * 4
             table.step()
-            handed_to_bullet += bool(table._simulated)
+            handed_to_bullet += bool(table._worlds.simulated)
             worst = max(worst, *(p / b for p, b in zip(peak, bounds)))
             if k % 60 == 0:
                 table.place_ball(rng.uniform(-0.5, 0.5, 2) * (1, 0.6), rng.uniform(-6, 6, 2))

@@ -11,7 +11,7 @@ import pytest
 from foosball_gym import physics_probes
 from foosball_gym import table as T
 from foosball_gym.policies import deflection
-from foosball_gym.simulator import TableSim
+from foosball_gym.sim import TableSim
 
 
 @pytest.fixture(scope="module")

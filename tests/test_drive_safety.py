@@ -32,8 +32,8 @@ from foosball_gym.hardware.cia402 import (
     state_name,
 )
 from foosball_gym.hardware.drives import DEFAULT_MASTER_NODE_ID, TableDrives
+from foosball_gym.sim import TableSim
 from foosball_gym.sim_table import SimulatedDrives
-from foosball_gym.simulator import TableSim
 
 SLIDE = ("home_keeper", "slide")
 SPIN = ("home_keeper", "spin")

@@ -31,8 +31,8 @@ from foosball_gym.hardware import (
 from foosball_gym.hardware.cia402 import CW_QUICK_STOP, OPERATION_ENABLED, state_name
 from foosball_gym.hardware.drives import TableDrives
 from foosball_gym.hardware.safety import JointLimits, TargetLimiter, Watchdog
+from foosball_gym.sim import TableSim
 from foosball_gym.sim_table import SimulatedDrives
-from foosball_gym.simulator import TableSim
 
 SLIDE = ("home_keeper", "slide")
 SPIN = ("home_keeper", "spin")
@@ -126,7 +126,7 @@ def test_the_driver_imports_neither_pybullet_nor_the_simulator():
     code = (
         "import sys; from foosball_gym.hardware import TableDrives, load_config;"
         "import foosball_gym.hardware.cia402, foosball_gym.hardware.safety;"
-        "bad = {'pybullet', 'foosball_gym.simulator'} & set(sys.modules);"
+        "bad = {'pybullet', 'foosball_gym.sim'} & set(sys.modules);"
         "assert not bad, bad"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from foosball_gym import table as T
-from foosball_gym.simulator import AWAY_SCORED, HOME_SCORED, NO_GOAL, TableSim
+from foosball_gym.sim import AWAY_SCORED, HOME_SCORED, NO_GOAL, TableSim
 
 
 @pytest.fixture
@@ -220,7 +220,7 @@ def test_a_position_drive_keeps_its_top_speed_after_a_spell_of_other_control(spe
             # From stop to stop: the drive asks for 12 m/s.
             sim.command("position", [keeper.slide_limit * (1 if k % 8 < 4 else -1), 0.0])
             sim.step()
-            if sim._simulated:  # Bullet had the keeper to the end of the step
+            if sim._worlds.simulated:  # Bullet had the keeper to the end of the step
                 in_bullet += 1
                 peak = max(peak, abs(sim.joint_states()[1][0]))
     finally:

@@ -1,4 +1,4 @@
-"""A rod the ball cannot reach moves by the drive model (foosball_gym/rod_drives.py), one it
+"""A rod the ball cannot reach moves by the drive model (foosball_gym/sim/drives.py), one it
 may meet moves in Bullet: both must move it the same, end stops and all three control modes
 included, or a rod would change its course as the ball came near."""
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from foosball_gym import table as T
-from foosball_gym.rod_drives import RodDrives
-from foosball_gym.simulator import TableSim
+from foosball_gym.sim import TableSim
+from foosball_gym.sim.drives import RodDrives
 
 RODS = ["home_keeper", "away_midfield", "home_defense", "away_offense"]
 
@@ -36,8 +36,7 @@ def test_a_rod_moves_the_same_in_bullet_and_in_the_drive_model(mode):
     try:
         # The ball waits far from every figurine while all four rods move in Bullet.
         sim.reset(ball_position=(0.3, 0.0))
-        world = sim._world_of(tuple(RODS))
-        sim._enter(world, tuple(range(len(RODS))))
+        world = sim._worlds.use(tuple(range(len(RODS))), sim._ball_full, sim._materials())
         bullet = sim._drives
         model = copy.deepcopy(bullet)
         rng = np.random.default_rng(1)
@@ -52,7 +51,7 @@ def test_a_rod_moves_the_same_in_bullet_and_in_the_drive_model(mode):
             model.pos[:], model.vel[:] = bullet.pos, bullet.vel
             for _ in range(sim.substeps):
                 sim._advance(world, base, 1, watch=True)
-                sim._take_rods()
+                sim._worlds.take_rods()
                 model.advance(range(model.n), base)
                 stops += sum(
                     not lo < q < hi for q, lo, hi in zip(model.pos, model.lower, model.upper)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from foosball_gym import table as T
-from foosball_gym.simulator import AWAY_SCORED, TableSim
+from foosball_gym.sim import AWAY_SCORED, TableSim
 from foosball_gym.tasks.serves import Shots
 
 WIDE = {

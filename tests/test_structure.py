@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -24,19 +25,20 @@ def imported_modules(path: Path) -> set[str]:
     return names
 
 
-def test_only_the_simulator_reaches_pybullet_through_its_bullet_worlds():
+def test_only_the_simulator_package_imports_pybullet_in_one_module():
     users = sorted(
         str(p.relative_to(PACKAGE))
         for p in PACKAGE.rglob("*.py")
         if {"pybullet", "pybullet_utils"} & imported_modules(p)
     )
-    assert users == ["bullet_worlds.py"]
-    worlds = sorted(
+    assert users == ["sim/worlds.py"]
+    # The Bullet worlds are the simulator's own: nothing outside sim/ reaches them.
+    outside = [
         str(p.relative_to(PACKAGE))
         for p in PACKAGE.rglob("*.py")
-        if "foosball_gym.bullet_worlds" in p.read_text()
-    )
-    assert worlds == ["simulator.py"]
+        if p.parent.name != "sim" and "foosball_gym.sim.worlds" in p.read_text()
+    ]
+    assert outside == []
 
 
 def test_importing_the_package_needs_no_torch_and_registers_the_ids():
@@ -94,7 +96,7 @@ def test_hardware_vision_estimation_and_the_play_loop_do_not_import_the_simulato
         "import sys;"
         "import foosball_gym.hardware.drives, foosball_gym.vision, foosball_gym.estimation;"
         "import foosball_gym.play.loop, foosball_gym.play.session, foosball_gym.play.stack;"
-        "bad = [m for m in ('pybullet', 'foosball_gym.simulator') if m in sys.modules];"
+        "bad = [m for m in ('pybullet', 'foosball_gym.sim') if m in sys.modules];"
         "assert not bad, bad"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
@@ -105,10 +107,8 @@ def test_only_the_simulated_table_reaches_the_simulator_from_the_hardware_side()
     hardware_side = ("hardware", "vision", "estimation", "play")
     for folder in hardware_side:
         for path in (PACKAGE / folder).rglob("*.py"):
-            source = path.read_text()
-            assert "foosball_gym.simulator" not in source.replace(
-                "``foosball_gym.simulator``", ""
-            ), path
+            source = path.read_text().replace("``foosball_gym.sim``", "")
+            assert not re.search(r"foosball_gym\.sim\b", source), path
 
 
 # Where each installed package's source lives: cli/ and urdf/ are installed into foosball_gym.
@@ -205,8 +205,7 @@ def test_no_module_imports_itself_back_through_others():
 BELOW = {
     "foosball_gym.interface": {
         "foosball_gym.envs",
-        "foosball_gym.simulator",
-        "foosball_gym.bullet_worlds",
+        "foosball_gym.sim",
         "foosball_gym.sim_table",
         "foosball_gym.tasks",
         "foosball_gym.game",
@@ -214,8 +213,7 @@ BELOW = {
     # A task is pure: what is played, not how it is simulated or shown.
     "foosball_gym.tasks": {
         "foosball_gym.envs",
-        "foosball_gym.simulator",
-        "foosball_gym.bullet_worlds",
+        "foosball_gym.sim",
         "foosball_gym.sim_table",
         "foosball_gym.game",
         "foosball_gym.training",
@@ -225,33 +223,28 @@ BELOW = {
     "foosball_gym.sim_table": {"foosball_gym.envs", "foosball_gym.training"},
     "foosball_gym.estimation": {
         "foosball_gym.envs",
-        "foosball_gym.simulator",
-        "foosball_gym.bullet_worlds",
+        "foosball_gym.sim",
         "foosball_gym.training",
     },
     "foosball_gym.vision": {
         "foosball_gym.envs",
-        "foosball_gym.simulator",
-        "foosball_gym.bullet_worlds",
+        "foosball_gym.sim",
         "foosball_gym.training",
     },
     "foosball_gym.hardware": {
         "foosball_gym.envs",
-        "foosball_gym.simulator",
-        "foosball_gym.bullet_worlds",
+        "foosball_gym.sim",
         "foosball_gym.training",
     },
     "foosball_gym.play": {
         "foosball_gym.envs",
-        "foosball_gym.simulator",
-        "foosball_gym.bullet_worlds",
+        "foosball_gym.sim",
         "foosball_gym.game",
         "foosball_gym.training",
     },
     "foosball_gym.policies": {
         "foosball_gym.envs",
-        "foosball_gym.simulator",
-        "foosball_gym.bullet_worlds",
+        "foosball_gym.sim",
         "foosball_gym.training",
     },
 }
@@ -385,7 +378,7 @@ ENV_ROOTS = (
     "foosball_gym.game",
     "foosball_gym.interface",
     "foosball_gym.policies",
-    "foosball_gym.simulator",
+    "foosball_gym.sim",
     "foosball_gym.table",
 )
 # Packages with an extra beyond train (the real table; PettingZoo and Ray) or the training side.

@@ -14,8 +14,8 @@ import pytest
 import yourdfpy
 
 from foosball_gym import table as T
-from foosball_gym.bullet_worlds import urdf_path
-from foosball_gym.simulator import TableSim
+from foosball_gym.sim import TableSim
+from foosball_gym.sim.urdf import urdf_path
 
 ROOT = Path(__file__).resolve().parents[1]
 URDF_DIR = ROOT / "urdf"
@@ -200,8 +200,8 @@ def test_a_file_planted_under_the_cached_urdf_name_is_not_trusted(tmp_path, monk
     import tempfile
     from pathlib import Path
 
-    from foosball_gym.bullet_worlds import urdf_with_rods as _urdf_with_rods
-    from foosball_gym.simulator import TableSim
+    from foosball_gym.sim import TableSim
+    from foosball_gym.sim.urdf import urdf_with_rods as _urdf_with_rods
 
     # A temp folder of this test's own: the shared one's file is in use by other processes.
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))

@@ -8,7 +8,7 @@ import pytest
 
 from foosball_gym import table as T
 from foosball_gym.camera import CameraModel
-from foosball_gym.simulator import TableSim
+from foosball_gym.sim import TableSim
 from foosball_gym.vision import (
     FIELD_MARKERS,
     CallableSource,

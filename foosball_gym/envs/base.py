@@ -256,7 +256,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self.dt = 1.0 / control_hz
 
         # Imported here: building a task's interface needs no simulator.
-        from foosball_gym.simulator import TableSim
+        from foosball_gym.sim import TableSim
 
         self.sim = TableSim(
             layout.rods,

@@ -1,7 +1,7 @@
 """The simulated table's camera in a process of its own, so that frames come in real time.
 
 PyBullet's CPU renderer needs about 3 ms for a 320 x 180 frame of one rod and 5 ms for all
-eight (the field and walls drawn once, see ``TableSim.render``; measured on one core), time
+eight (the field and walls drawn once, see ``View.render``; measured on one core), time
 the loop's own core cannot spare on top of its work, and a shared machine sometimes holds a
 render up for tens of milliseconds. A second process holds a copy of the table that only
 poses and renders. Each control step the table sends it the new scene, and the loop takes
@@ -26,22 +26,26 @@ START_TIMEOUT_S = 60.0
 
 
 def _serve(conn: Connection, rods: tuple[str, ...], width: int, height: int) -> None:
-    from foosball_gym.simulator import TableSim
+    from foosball_gym import table as T
+    from foosball_gym.sim import View
 
-    sim = TableSim(rods)
+    view = View([T.rod(name) for name in rods], gui=False)
+    still = [0.0] * (2 * len(rods))
     try:
+        # The first picture draws the table's fixed parts; drawn before the loop asks for one.
+        view.render(width, height)
         conn.send("ready")
         while True:
             request = conn.recv()
             if request is None:
                 break
             stamp, positions, ball = request
-            sim.show(positions, ball)
-            conn.send((stamp, sim.render(width, height)))
+            view.pose(positions, still, ball)
+            conn.send((stamp, view.render(width, height)))
     except (EOFError, KeyboardInterrupt, BrokenPipeError):
         pass
     finally:
-        sim.close()
+        view.close()
 
 
 Stamp = tuple[int, float]

@@ -5,7 +5,7 @@
 and heartbeat, SDO access to its objects, PDOs as the master maps them (synchronous RPDOs are
 taken on SYNC), the CiA 402 state machine driven by the controlword, modes 1 (profile
 position) and 8 (cyclic synchronous position) with their display, EMCY on faults. Behind it,
-each node's joint of a :class:`~foosball_gym.simulator.TableSim` follows the node's target.
+each node's joint of a :class:`~foosball_gym.sim.TableSim` follows the node's target.
 
 How a drive stops, as its objects say (see :mod:`foosball_gym.hardware.cia402`):
 
@@ -89,7 +89,7 @@ from foosball_gym.hardware.config import Joint, JointConfig, TableConfig
 from foosball_gym.hardware.safety import JointLimits, TargetLimiter
 
 if TYPE_CHECKING:
-    from foosball_gym.simulator import TableSim
+    from foosball_gym.sim import TableSim
 
 # A 29-bit frame the nodes' network sends to itself to learn that everything before it has
 # been processed; CANopen devices use 11-bit identifiers only and never look at it.

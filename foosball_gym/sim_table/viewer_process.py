@@ -36,13 +36,15 @@ def _serve(conn: Connection, rods: tuple[str, ...]) -> None:
     # The window gives way to the table, the camera and the loop, which keep the wall clock.
     with contextlib.suppress(OSError, AttributeError):
         os.nice(NICENESS)
-    from foosball_gym.simulator import TableSim
+    from foosball_gym import table as T
+    from foosball_gym.sim import View
 
     try:
-        sim = TableSim(rods, gui=True)
+        view = View([T.rod(name) for name in rods], gui=True)
     except Exception as err:  # the parent raises it, with its message
         conn.send(("error", str(err)))
         return
+    still = [0.0] * (2 * len(rods))
     held: frozenset[str] = frozenset()
     try:
         conn.send("ready")
@@ -56,11 +58,12 @@ def _serve(conn: Connection, rods: tuple[str, ...]) -> None:
                 if kind == "scene":
                     scene = args  # only the newest is shown
                 else:
-                    sim.show_text(*args)
+                    view.show_text(*args)
             if scene is not None:
-                sim.show(*scene)
+                positions, ball = scene
+                view.pose(positions, still, ball)
                 conn.send(("shown",))
-            keys, pressed = sim.keyboard_events()
+            keys, pressed = view.keyboard_events()
             if keys != held or pressed:
                 conn.send(("keys", keys, pressed))
                 held = keys
@@ -69,7 +72,7 @@ def _serve(conn: Connection, rods: tuple[str, ...]) -> None:
     except Exception:
         pass  # the window was closed: PyBullet lost its server, and the parent sees EOF
     finally:
-        sim.close()
+        view.close()
 
 
 class ViewerProcess:
@@ -130,7 +133,7 @@ class ViewerProcess:
             self._conn.send(message)
 
     def show(self, positions: Sequence[float], ball: Sequence[float]) -> None:
-        """Pose the window's table (see :meth:`TableSim.show`), unless it is still drawing the
+        """Pose the window's table (see :meth:`View.pose`), unless it is still drawing the
         last scene: the window drops what it has no time for."""
         if self._drawing or not self._open:
             return
@@ -138,12 +141,12 @@ class ViewerProcess:
         self._send(("scene", list(positions), list(ball)))
 
     def show_text(self, lines: Sequence[str]) -> None:
-        """Write ``lines`` in the window (see :meth:`TableSim.show_text`)."""
+        """Write ``lines`` in the window (see :meth:`View.show_text`)."""
         self._send(("text", list(lines)))
 
     def keyboard_events(self) -> tuple[frozenset[str], frozenset[str]]:
         """The keys held in the window now and those pressed since the last call (see
-        :meth:`TableSim.keyboard_events`)."""
+        :meth:`View.keyboard_events`)."""
         with self._keys_lock:
             pressed, self._pressed = frozenset(self._pressed), set()
             return self._held, pressed

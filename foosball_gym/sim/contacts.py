@@ -6,7 +6,7 @@ its drive asks for) can get to. Where the ball could touch a figurine, a wall or
 above within the step, the step is split into physics steps fine enough that nothing moves more
 than ``contact_travel`` relative to what it may touch (twice that near a wall alone, which is
 flat). The rods that could touch the ball are the ones Bullet must simulate; the others cannot
-meet it and move by their drives alone (:mod:`foosball_gym.rod_drives`).
+meet it and move by their drives alone (:mod:`foosball_gym.sim.drives`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 from foosball_gym import table as T
 
 if TYPE_CHECKING:
-    from foosball_gym.rod_drives import RodDrives
+    from foosball_gym.sim.drives import RodDrives
 
 # Where a figurine can be, in the plane across its rod (distances from the rod's axis): the
 # body, a box round the axis, reaches BODY_REACH; the leg spans LEG_INNER..LEG_OUTER (the

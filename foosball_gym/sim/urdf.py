@@ -1,0 +1,109 @@
+"""The table's URDF with just the rods in play, assembled from the shipped one (no pybullet)."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+import xml.etree.ElementTree as ET
+from functools import cache
+from importlib import resources
+from pathlib import Path
+
+from foosball_gym import table as T
+
+
+def urdf_path(name: str = "foosball_table.urdf") -> Path:
+    """Path of a URDF shipped with the package (``urdf/`` of the source tree)."""
+    try:
+        return Path(str(resources.files("foosball_gym.urdf") / name))
+    except ModuleNotFoundError:
+        # A source checkout imported straight from its directory has no mapped subpackage.
+        return Path(__file__).resolve().parents[2] / "urdf" / name
+
+
+@cache
+def urdf_with_rods(rod_names: tuple[str, ...]) -> str:
+    """The table URDF with only the given rods, written once per process and rod set."""
+    tree = ET.parse(urdf_path())
+    robot = tree.getroot()
+    keep = set(rod_names)
+
+    def rod_of(name: str) -> str | None:
+        for rod in T.RODS:
+            if name.startswith(rod.name + "_"):
+                return rod.name
+        return None
+
+    for el in list(robot):
+        if el.tag in ("link", "joint"):
+            owner = rod_of(el.get("name", ""))
+            if owner is not None and owner not in keep:
+                robot.remove(el)
+    _merge_fixed_links(robot)
+    # The copy lives elsewhere, so the meshes it names are given by their full path.
+    for mesh in robot.iter("mesh"):
+        mesh.set("filename", str(urdf_path(mesh.get("filename", ""))))
+    text = ET.tostring(robot, encoding="unicode")
+    # Named by content, so processes share one file and a changed table gets a new one.
+    digest = hashlib.sha1(text.encode()).hexdigest()[:16]
+    path = Path(tempfile.gettempdir()) / f"foosball_gym_{digest}.urdf"
+    # Anyone can write to the temp folder: a file under this name is used only if it holds
+    # exactly this table.
+    if not _holds(path, text):
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".urdf")
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    return str(path)
+
+
+def _holds(path: Path, text: str) -> bool:
+    try:
+        return path.read_text() == text
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
+def _merge_fixed_links(robot: ET.Element) -> None:
+    """Fold every link on a fixed joint (the figurines) into its parent (the rod).
+
+    This is what Bullet's ``URDF_MERGE_FIXED_LINKS`` does, done before loading because that
+    flag leaks about 100 kB of Bullet's memory per load. The order Bullet merges in (a
+    parent's first child, then the others last to first) and the way it sums the centre of
+    mass are kept, so the table is the same to the last bit.
+    """
+    links = {link.get("name"): link for link in robot.findall("link")}
+    children: dict[str, list[ET.Element]] = {}
+    for joint in robot.findall("joint"):
+        if joint.get("type") == "fixed":
+            children.setdefault(joint.find("parent").get("link"), []).append(joint)
+    for parent_name, joints in children.items():
+        parent = links[parent_name]
+        inertial = parent.find("inertial")
+        mass = float(inertial.find("mass").get("value"))
+        com = [float(v) for v in inertial.find("origin").get("xyz").split()]
+        for joint in joints[:1] + joints[:0:-1]:
+            child = links[joint.find("child").get("link")]
+            offset = [float(v) for v in joint.find("origin").get("xyz").split()]
+            if any(float(v) for v in joint.find("origin").get("rpy", "0 0 0").split()):
+                raise ValueError(f"fixed joint {joint.get('name')} is turned; not merged")
+            child_inertial = child.find("inertial")
+            child_mass = float(child_inertial.find("mass").get("value"))
+            child_com = [
+                float(v) + o
+                for v, o in zip(child_inertial.find("origin").get("xyz").split(), offset)
+            ]
+            total = mass + child_mass
+            com = [(mass * a + child_mass * b) * (1 / total) for a, b in zip(com, child_com)]
+            mass = total
+            for element in child:
+                if element.tag in ("visual", "collision"):
+                    origin = element.find("origin")
+                    xyz = [float(v) for v in origin.get("xyz").split()]
+                    origin.set("xyz", " ".join(repr(v + o) for v, o in zip(xyz, offset)))
+                    parent.append(element)
+            robot.remove(child)
+            robot.remove(joint)
+        inertial.find("mass").set("value", repr(mass))
+        inertial.find("origin").set("xyz", " ".join(repr(v) for v in com))
