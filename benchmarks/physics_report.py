@@ -1,6 +1,6 @@
 """A plain-text report of the simulated table's contacts, from the probes in
 ``foosball_gym.physics_probes``: wall rebounds, tunnelling, corner kicks, rolling, volleys,
-a foot swinging at full speed.
+a foot swung at the drive's top speed.
 
     python benchmarks/physics_report.py [--quick] [--contact-travel M] [--physics-hz HZ]
                                         [--json FILE]
@@ -21,7 +21,11 @@ from collections.abc import Callable
 
 from foosball_gym import physics_probes
 from foosball_gym import table as T
-from foosball_gym.sim import TableSim
+
+try:
+    from foosball_gym.sim import TableSim
+except ImportError:  # a checkout from before the sim package
+    from foosball_gym.simulator import TableSim
 
 FULL = {
     "speeds": (1.5, 3.0, 5.0, 10.0, 15.0, 20.0),
