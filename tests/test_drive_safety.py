@@ -328,3 +328,43 @@ def test_every_stop_brakes_to_standstill_before_the_power_goes_off(realtime_tabl
     t, positions, velocities = zip(*table.trace)
     after = [i for i, ti in enumerate(t) if ti > t[-1] - 0.15]
     np.testing.assert_allclose(np.array(velocities)[after], 0.0, atol=1e-3)
+
+
+def test_a_tripped_latch_is_reported_only_once_its_stop_has_been_sent():
+    # The command guard trips the latch on its own thread; the play loop, checking meanwhile,
+    # must not see the error (and go on to say the drives stopped) before the stop is out.
+    from foosball_gym.hardware.safety import SafetyLatch
+
+    stopping, release, sent = threading.Event(), threading.Event(), threading.Event()
+
+    def stop_all(error):
+        stopping.set()
+        release.wait(5)
+        sent.set()
+
+    latch = SafetyLatch(stop_all)
+    error = WatchdogTripped("command", 0.1, 0.05)
+
+    def guard_trips():
+        with contextlib.suppress(WatchdogTripped):
+            latch.trip(error)
+
+    guard = threading.Thread(target=guard_trips)
+    guard.start()
+    assert stopping.wait(5)
+    seen = []
+
+    def loop_checks():
+        try:
+            latch.check()
+        except WatchdogTripped:
+            seen.append(sent.is_set())
+
+    loop = threading.Thread(target=loop_checks)
+    loop.start()
+    time.sleep(0.05)
+    assert seen == []  # still waiting for the stop
+    release.set()
+    loop.join(5)
+    guard.join(5)
+    assert seen == [True]

@@ -314,9 +314,11 @@ class SafetyLatch:
             raise self.error
 
     def check(self) -> None:
-        """Raise the error that tripped the latch, if any."""
+        """Raise the error that tripped the latch, if any, once its stop has been sent (a trip
+        on another thread holds the lock until then)."""
         if self.error is not None:
-            raise self.error
+            with self._lock:
+                raise self.error
 
     def reset(self) -> None:
         with self._lock:
