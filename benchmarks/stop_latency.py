@@ -27,7 +27,7 @@ from foosball_gym.hardware import BusConfig, JointConfig, TableConfig
 from foosball_gym.hardware.cia402 import CW_DISABLE_VOLTAGE, CW_QUICK_STOP
 from foosball_gym.hardware.drives import TableDrives
 from foosball_gym.sim import TableSim
-from foosball_gym.sim_table import SimulatedDrives
+from foosball_gym.virtual_table import SimulatedDrives
 
 SLIDE = ("home_keeper", "slide")
 SPIN = ("home_keeper", "spin")

@@ -171,8 +171,8 @@ def run(args: argparse.Namespace) -> int:
         ) from None
     from foosball_gym.hardware.config import ConfigError, load_config
     from foosball_gym.hardware.safety import SafetyError
-    from foosball_gym.sim_table.viewer_process import WindowError
     from foosball_gym.tasks import task_interface
+    from foosball_gym.virtual_table.viewer_process import WindowError
 
     human = args.human_rod or ("keeper" if args.human else None)
     gui = args.gui or human is not None

@@ -2,7 +2,7 @@
 
 Both faces of the simulation use it: the Gymnasium environment (:mod:`foosball_gym.envs`),
 which adds actions, observations and rewards, and the simulated real table
-(:mod:`foosball_gym.sim_table`), whose learner's rods are moved by simulated CAN drives
+(:mod:`foosball_gym.virtual_table`), whose learner's rods are moved by simulated CAN drives
 instead. The game only calls the :class:`~foosball_gym.sim.TableSim` it is given.
 """
 

@@ -393,12 +393,12 @@ def test_calibrate_finds_the_intrinsics_from_chessboards_and_the_pose_from_the_f
     import cv2
 
     from foosball_gym.hardware.config import load_config, save_config, shipped_table
-    from foosball_gym.sim_table.simulated_table import SimulatedTable, sim_table_config
     from foosball_gym.tasks import task_interface
+    from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
     from foosball_gym.vision import CameraCalibration
 
     table = SimulatedTable(
-        "Foosball-Block-v0", {}, sim_table_config(task_interface("Foosball-Block-v0"))
+        "Foosball-Block-v0", {}, virtual_table_config(task_interface("Foosball-Block-v0"))
     )
     try:
         frame = cv2.cvtColor(table.frame(), cv2.COLOR_RGB2BGR)

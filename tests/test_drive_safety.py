@@ -33,7 +33,7 @@ from foosball_gym.hardware.cia402 import (
 )
 from foosball_gym.hardware.drives import DEFAULT_MASTER_NODE_ID, TableDrives
 from foosball_gym.sim import TableSim
-from foosball_gym.sim_table import SimulatedDrives
+from foosball_gym.virtual_table import SimulatedDrives
 
 SLIDE = ("home_keeper", "slide")
 SPIN = ("home_keeper", "spin")

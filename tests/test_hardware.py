@@ -32,7 +32,7 @@ from foosball_gym.hardware.cia402 import CW_QUICK_STOP, OPERATION_ENABLED, state
 from foosball_gym.hardware.drives import TableDrives
 from foosball_gym.hardware.safety import JointLimits, TargetLimiter, Watchdog
 from foosball_gym.sim import TableSim
-from foosball_gym.sim_table import SimulatedDrives
+from foosball_gym.virtual_table import SimulatedDrives
 
 SLIDE = ("home_keeper", "slide")
 SPIN = ("home_keeper", "spin")

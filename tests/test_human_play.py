@@ -192,7 +192,7 @@ def test_play_in_the_gui_without_a_display_is_a_one_line_error(option, capsys, m
 
 @needs_hardware
 def test_the_window_of_a_table_without_a_display_says_so(monkeypatch):
-    from foosball_gym.sim_table.viewer_process import ViewerProcess, WindowError
+    from foosball_gym.virtual_table.viewer_process import ViewerProcess, WindowError
 
     monkeypatch.setenv("DISPLAY", ":7999")  # no X server there
     with pytest.raises(WindowError, match="could not open its window on the display ':7999'"):
@@ -395,7 +395,7 @@ def test_the_window_writes_the_score_above_the_table(display):
     from Xlib import X
     from Xlib.display import Display
 
-    from foosball_gym.sim_table.viewer_process import ViewerProcess
+    from foosball_gym.virtual_table.viewer_process import ViewerProcess
 
     def dark_pixels(window) -> int:
         """Near-black pixels in the part of ``window`` on the screen."""

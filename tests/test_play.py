@@ -19,8 +19,8 @@ from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.hardware.config import load_config, save_config, shipped_table  # noqa: E402
 from foosball_gym.play.session import read_session, replay  # noqa: E402
 from foosball_gym.play.stack import build_perception, play_sim  # noqa: E402
-from foosball_gym.sim_table.simulated_table import SimulatedTable, sim_table_config  # noqa: E402
 from foosball_gym.tasks import task_interface  # noqa: E402
+from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config  # noqa: E402
 from foosball_gym.vision import CameraCalibration  # noqa: E402
 
 SMALL_CAMERA = (320, 180)
@@ -104,7 +104,7 @@ def test_a_step_the_table_takes_while_the_loop_decides_makes_that_loop_late(monk
     """The table counts the steps it took with no loop waiting (see the real-time table's
     own test); each is charged to the loop that was deciding then. Here a lock-step table
     is told of such a step from inside every other decision, so the count is exact."""
-    from foosball_gym.sim_table import simulated_table
+    from foosball_gym.virtual_table import simulated_table
 
     tables = []
     real_init = simulated_table.SimulatedTable.__init__
@@ -176,7 +176,7 @@ def test_a_logged_session_replays_to_the_same_decisions(tmp_path):
     header, records = read_session(log)
     assert header["env_id"] == "Foosball-Block-v0" and header["action"] == ["home_keeper.slide"]
     interface = task_interface("Foosball-Block-v0")
-    config = sim_table_config(interface)
+    config = virtual_table_config(interface)
     config.camera["calibration"] = header["table"]["camera"]["calibration"]
     _, _, estimator, _ = build_perception(config, interface, 0.03)
     n = len(interface.builder.rods_in_play)
@@ -198,7 +198,7 @@ def test_a_logged_session_replays_to_the_same_decisions(tmp_path):
 
 def test_calibrate_writes_the_camera_pose_into_the_table_configuration(tmp_path, capsys):
     interface = task_interface("Foosball-Block-v0")
-    table = SimulatedTable("Foosball-Block-v0", {}, sim_table_config(interface))
+    table = SimulatedTable("Foosball-Block-v0", {}, virtual_table_config(interface))
     try:
         frame = cv2.cvtColor(table.frame(), cv2.COLOR_RGB2BGR)
         truth = CameraCalibration.from_camera_model(table.camera_model)
@@ -238,7 +238,7 @@ def test_the_shipped_table_configuration_loads():
 
 def realtime_block_table():
     interface = task_interface("Foosball-Block-v0")
-    config = sim_table_config(interface)
+    config = virtual_table_config(interface)
     table = SimulatedTable("Foosball-Block-v0", {}, config, camera_size=SMALL_CAMERA, realtime=True)
     return table, config
 
@@ -292,9 +292,9 @@ def test_real_time_frames_show_the_ball_where_it_was_when_they_were_taken():
 
 def test_a_paced_lock_step_table_never_runs_ahead_of_the_wall_clock():
     interface = task_interface("Foosball-Block-v0")
-    config = sim_table_config(interface)
+    config = virtual_table_config(interface)
     paced = SimulatedTable("Foosball-Block-v0", {}, config, pace=True)
-    free = SimulatedTable("Foosball-Block-v0", {}, sim_table_config(interface))
+    free = SimulatedTable("Foosball-Block-v0", {}, virtual_table_config(interface))
     try:
         for table in (paced, free):
             table.serve()
@@ -315,10 +315,10 @@ def test_a_paced_lock_step_table_never_runs_ahead_of_the_wall_clock():
 
 
 def test_a_frame_that_comes_too_late_is_named_and_not_waited_for():
-    from foosball_gym.sim_table.camera_process import CameraProcess
+    from foosball_gym.virtual_table.camera_process import CameraProcess
 
     sim = SimulatedTable(
-        "Foosball-Block-v0", {}, sim_table_config(task_interface("Foosball-Block-v0"))
+        "Foosball-Block-v0", {}, virtual_table_config(task_interface("Foosball-Block-v0"))
     )
     camera = CameraProcess([r.name for r in sim.sim.rods], 320, 180)
     try:

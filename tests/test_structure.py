@@ -206,7 +206,7 @@ BELOW = {
     "foosball_gym.interface": {
         "foosball_gym.envs",
         "foosball_gym.sim",
-        "foosball_gym.sim_table",
+        "foosball_gym.virtual_table",
         "foosball_gym.tasks",
         "foosball_gym.game",
     },
@@ -214,27 +214,34 @@ BELOW = {
     "foosball_gym.tasks": {
         "foosball_gym.envs",
         "foosball_gym.sim",
-        "foosball_gym.sim_table",
+        "foosball_gym.virtual_table",
         "foosball_gym.game",
         "foosball_gym.training",
     },
-    "foosball_gym.game": {"foosball_gym.envs", "foosball_gym.sim_table", "foosball_gym.training"},
+    "foosball_gym.game": {
+        "foosball_gym.envs",
+        "foosball_gym.virtual_table",
+        "foosball_gym.training",
+    },
     # The simulated table plays the game itself; it never builds an environment.
-    "foosball_gym.sim_table": {"foosball_gym.envs", "foosball_gym.training"},
+    "foosball_gym.virtual_table": {"foosball_gym.envs", "foosball_gym.training"},
     "foosball_gym.estimation": {
         "foosball_gym.envs",
         "foosball_gym.sim",
         "foosball_gym.training",
+        "foosball_gym.virtual_table",
     },
     "foosball_gym.vision": {
         "foosball_gym.envs",
         "foosball_gym.sim",
         "foosball_gym.training",
+        "foosball_gym.virtual_table",
     },
     "foosball_gym.hardware": {
         "foosball_gym.envs",
         "foosball_gym.sim",
         "foosball_gym.training",
+        "foosball_gym.virtual_table",
     },
     "foosball_gym.play": {
         "foosball_gym.envs",
@@ -387,7 +394,7 @@ OWN_EXTRAS = (
     "foosball_gym.multiagent",
     "foosball_gym.hardware",
     "foosball_gym.play",
-    "foosball_gym.sim_table",
+    "foosball_gym.virtual_table",
 )
 # The import names of each distribution whose own name (lower case, - as _) is not one.
 IMPORT_NAMES = {

@@ -233,11 +233,11 @@ def play_sim(
     """Play ``episodes`` served balls on the simulated table, through the whole stack.
 
     ``realtime`` runs the table on the wall clock (see
-    :mod:`foosball_gym.sim_table.simulated_table`); the default is lock-step. The camera's
+    :mod:`foosball_gym.virtual_table.simulated_table`); the default is lock-step. The camera's
     frames are 640 x 360 in lock-step and 320 x 180 in real time unless ``camera_size`` says.
 
     ``camera_latency_s`` is how long the simulated camera's frames take to reach the loop
-    (see :class:`~foosball_gym.sim_table.simulated_table.SimulatedTable`; by default the
+    (see :class:`~foosball_gym.virtual_table.simulated_table.SimulatedTable`; by default the
     latency of the task's simulated camera, 30 ms unless ``camera_noise`` says).
 
     ``gui`` opens the PyBullet GUI on the table, with the serve and the score written in the
@@ -253,8 +253,8 @@ def play_sim(
         ValueError: ``human`` names no away rod of the task (or the task has no away side).
         WindowError: the GUI window could not be opened (no display); a RuntimeError.
     """
-    from foosball_gym.sim_table.simulated_table import SimulatedTable, sim_table_config
     from foosball_gym.tasks import task_interface
+    from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
 
     if camera_size is None:
         # A paced table renders in the loop's own time: the small frame keeps it near real time.
@@ -262,7 +262,7 @@ def play_sim(
     interface = task_interface(env_id, env_kwargs)
     rod = None if human is None else human_rod(env_id, interface.layout, human)
     gui = gui or rod is not None
-    config = sim_table_config(interface)
+    config = virtual_table_config(interface)
     table = SimulatedTable(
         env_id,
         env_kwargs,

@@ -5,7 +5,7 @@ PyBullet's GUI answers a client's calls between the frames it draws. With a soft
 (a virtual display) a physics step then took 14 ms instead of 0.08 ms, a camera frame 53 ms
 instead of 12 and reading the keyboard 15 ms (measured): a table in the GUI could not keep the
 wall clock. So the table that plays stays headless, and a second process holds a copy of it
-that only poses (as the camera's does, :mod:`~foosball_gym.sim_table.camera_process`), writes
+that only poses (as the camera's does, :mod:`~foosball_gym.virtual_table.camera_process`), writes
 the score and reads the keyboard. It shows the newest scene it is sent and drops those it has
 no time for; the keys come back as they change. The window's own loop never idles: it takes
 a core or two whatever the table does.

@@ -13,12 +13,12 @@ Two ways to keep time:
   the game instead of stopping it.
 - **real time** (``realtime=True``): a thread steps the table at the control rate of the wall
   clock, whatever the loop is doing, as a real table moves; the camera renders in a process of
-  its own (:mod:`~foosball_gym.sim_table.camera_process`). :meth:`SimulatedTable.step` then
+  its own (:mod:`~foosball_gym.virtual_table.camera_process`). :meth:`SimulatedTable.step` then
   waits for the next control step, and a loop that comes after its step has passed is late:
   its command acts one step later. Late steps are counted.
 
 With ``gui=True`` a PyBullet GUI window shows the table
-(:mod:`~foosball_gym.sim_table.viewer_process`): a person watches it (:meth:`show_text` writes
+(:mod:`~foosball_gym.virtual_table.viewer_process`): a person watches it (:meth:`show_text` writes
 the score in it) or plays the away side from its keyboard (:meth:`keyboard_events`, read by an
 opponent that :meth:`set_opponent` sets).
 A serve ends as the task's episodes do: at a goal, with the ball off the table, or with the
@@ -44,10 +44,10 @@ from foosball_gym.hardware.config import BusConfig, JointConfig, TableConfig
 from foosball_gym.interface.task import TaskInterface
 from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
 from foosball_gym.sim import TableSim, drive_acceleration
-from foosball_gym.sim_table.camera_process import CameraProcess, FrameBuffer
-from foosball_gym.sim_table.drives import SimulatedDrives
-from foosball_gym.sim_table.viewer_process import ViewerProcess
 from foosball_gym.tasks import interface_of, make_task
+from foosball_gym.virtual_table.camera_process import CameraProcess, FrameBuffer
+from foosball_gym.virtual_table.drives import SimulatedDrives
+from foosball_gym.virtual_table.viewer_process import ViewerProcess
 
 # Calibration of the simulated drives: arbitrary but drive-like, and the revolute drive turned
 # round, so that a sign error anywhere between policy and rod shows.
@@ -60,7 +60,7 @@ FRAME_PATIENCE = 0.6
 _channels = itertools.count()
 
 
-def sim_table_config(interface: TaskInterface, mode: str = "csp") -> TableConfig:
+def virtual_table_config(interface: TaskInterface, mode: str = "csp") -> TableConfig:
     """A table configuration with one drive per joint of the task's controlled rods, on a
     virtual CAN channel of its own."""
     joints = []
@@ -101,7 +101,7 @@ class SimulatedTable:
 
     Args:
         env_id, env_kwargs: the task the policy was trained on (its physics options apply).
-        config: the table configuration the master uses (see :func:`sim_table_config`); its
+        config: the table configuration the master uses (see :func:`virtual_table_config`); its
             bus must be a ``virtual`` one.
         seed: seeds the serves (and the opponent's randomness, if any).
         camera_size: (width, height) of the rendered camera frames.
