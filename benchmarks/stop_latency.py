@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 from foosball_gym.hardware import BusConfig, JointConfig, TableConfig
-from foosball_gym.hardware.cia402 import CW_DISABLE_VOLTAGE, CW_QUICK_STOP
+from foosball_gym.hardware.cia402.protocol import CW_DISABLE_VOLTAGE, CW_QUICK_STOP
 from foosball_gym.hardware.drives import TableDrives
 from foosball_gym.sim import TableSim
 from foosball_gym.virtual_table import SimulatedDrives

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from foosball_gym.hardware import BusConfig, DriveFault, JointConfig, TableConfig, WatchdogTripped
-from foosball_gym.hardware.cia402 import (
+from foosball_gym.hardware.cia402.protocol import (
     ABORT_CONNECTION_OPTION_CODE,
     CONSUMER_HEARTBEAT_TIME,
     CW_DISABLE_VOLTAGE,

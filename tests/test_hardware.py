@@ -28,7 +28,7 @@ from foosball_gym.hardware import (
     save_config,
     shipped_table,
 )
-from foosball_gym.hardware.cia402 import CW_QUICK_STOP, OPERATION_ENABLED, state_name
+from foosball_gym.hardware.cia402.protocol import CW_QUICK_STOP, OPERATION_ENABLED, state_name
 from foosball_gym.hardware.drives import TableDrives
 from foosball_gym.hardware.safety import JointLimits, TargetLimiter, Watchdog
 from foosball_gym.sim import TableSim

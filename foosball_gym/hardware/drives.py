@@ -26,8 +26,9 @@ Two supervisors do not depend on the loop calling in:
   whatever the loop is doing (a policy that blocks, a camera that hangs);
 - the master's heartbeat (:class:`MasterHeartbeat`), sent from a thread of its own and with
   every command; each drive is set up to quick-stop itself when it misses it for
-  ``heartbeat_timeout_s`` (objects 0x1016 and 0x6007, see :mod:`~foosball_gym.hardware.cia402`),
-  which covers a master that was killed, whose interpreter is stuck, or that lost the bus.
+  ``heartbeat_timeout_s`` (objects 0x1016 and 0x6007, see
+  :mod:`~foosball_gym.hardware.cia402.bring_up`), which covers a master that was killed, whose
+  interpreter is stuck, or that lost the bus.
 """
 
 from __future__ import annotations

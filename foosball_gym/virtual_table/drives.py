@@ -7,7 +7,7 @@ taken on SYNC), the CiA 402 state machine driven by the controlword, modes 1 (pr
 position) and 8 (cyclic synchronous position) with their display, EMCY on faults. Behind it,
 each node's joint of a :class:`~foosball_gym.sim.TableSim` follows the node's target.
 
-How a drive stops, as its objects say (see :mod:`foosball_gym.hardware.cia402`):
+How a drive stops, as its objects say (see :mod:`foosball_gym.hardware.cia402.bring_up`):
 
 - a quick stop (controlword, or a lost master heartbeat with 0x6007 = 3) brakes from the
   joint's velocity at the quick stop deceleration (0x6085) or, for option codes 1 and 5 of
@@ -57,7 +57,8 @@ from canopen.objectdictionary import ODVariable
 from canopen.pdo import PdoMap
 from canopen.sdo import SdoAbortedError
 
-from foosball_gym.hardware.cia402 import (
+from foosball_gym.hardware.cia402.object_dictionary import object_dictionary
+from foosball_gym.hardware.cia402.protocol import (
     ABORT_CONNECTION_OPTION_CODE,
     CONSUMER_HEARTBEAT_TIME,
     CONTROLWORD,
@@ -83,7 +84,6 @@ from foosball_gym.hardware.cia402 import (
     SW_TARGET_REACHED,
     TARGET_POSITION,
     VELOCITY_ACTUAL,
-    object_dictionary,
 )
 from foosball_gym.hardware.config import Joint, JointConfig, TableConfig
 from foosball_gym.hardware.safety import JointLimits, TargetLimiter

@@ -1,28 +1,10 @@
-"""One CiA 402 drive on CANopen (a Nanotec C5-E in the paper's table).
+"""One CiA 402 drive on CANopen (a Nanotec C5-E in the paper's table), seen from the master.
 
 :class:`Cia402Drive` brings one drive from whatever state it is in (a fault included) to
-"operation enabled" in the configured mode, sends it targets in SI units, reads its position
+"operation enabled" in the configured mode, with the stop reactions of
+:mod:`~foosball_gym.hardware.cia402.bring_up`; sends it targets in SI units, reads its position
 and velocity back, stops it, and reports its faults: the statusword's fault bit, EMCY messages
 and a lost or unexpected heartbeat, each with the node id and the reason.
-
-What bring-up sets so that a drive stops safely on its own (CiA 301 / CiA 402):
-
-- 0x1017 producer heartbeat time: the drive beats three times per heartbeat timeout, so the
-  master notices a dead drive.
-- 0x1016 consumer heartbeat time, sub-index 1: the master's node id and the heartbeat timeout.
-  The master beats from a thread of its own (``TableDrives``); a master that is killed, hangs
-  with the interpreter stuck, or loses the bus stops beating, and the drive notices by itself.
-- 0x6007 abort connection option code = 3: a lost master heartbeat means a quick stop.
-- 0x605A quick stop option code = 6: brake on the quick stop ramp (0x6085), then stay in QUICK
-  STOP ACTIVE holding the position under power; a stopped rod neither coasts nor swings.
-- 0x605B shutdown option code = 1 and 0x605C disable operation option code = 1: a shutdown or
-  disable-operation command from any tool brakes on the slow-down ramp (0x6084) before the
-  power stage goes off, instead of letting the rod coast.
-- 0x605E fault reaction option code = 2: a fault the drive can still brake through stops on
-  the quick stop ramp before the power stage goes off.
-- 0x6084 / 0x6085: both ramps at the joint's ``max_acceleration``, the hardest the targets
-  ever ask of it, so a stop from top speed takes ``max_speed / max_acceleration`` (80 ms for
-  the keeper's slide, 105 ms for its spin with the shipped limits).
 
 Every stop of the master brakes first and cuts power only once the drive reports standstill
 (:meth:`Cia402Drive.wait_until_stopped`): cutting it during the ramp would leave the rod
@@ -44,88 +26,47 @@ Modes (``TableConfig.mode``):
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import struct
-import threading
 import time
-from collections.abc import Iterator
 
-import can
 import canopen
 from canopen.emcy import EmcyError
-from canopen.nmt import NMT_STATES, NmtError
-from canopen.objectdictionary import (
-    INTEGER8,
-    INTEGER16,
-    INTEGER32,
-    UNSIGNED8,
-    UNSIGNED16,
-    UNSIGNED32,
-    ObjectDictionary,
-    ODRecord,
-    ODVariable,
-)
-from canopen.profiles.p402 import State402
-from canopen.sdo.exceptions import SdoError
+from canopen.nmt import NMT_STATES
 
+from foosball_gym.hardware.cia402.bring_up import lay_out_csp_pdos, mode_settings, stop_settings
+from foosball_gym.hardware.cia402.link import DriveLink
+from foosball_gym.hardware.cia402.protocol import (
+    CONSUMER_HEARTBEAT_TIME,
+    CONTROLWORD,
+    CW_CHANGE_IMMEDIATELY,
+    CW_DISABLE_VOLTAGE,
+    CW_ENABLE_OPERATION,
+    CW_FAULT_RESET,
+    CW_NEW_SET_POINT,
+    CW_QUICK_STOP,
+    CW_SHUTDOWN,
+    CW_SWITCH_ON,
+    DEVICE_PROFILE,
+    DEVICE_TYPE,
+    MODE_CODES,
+    MODES_OF_OPERATION,
+    MODES_OF_OPERATION_DISPLAY,
+    NMT_BOOT_UP,
+    NMT_OPERATIONAL,
+    OPERATION_ENABLED,
+    POSITION_ACTUAL,
+    SW_FAULT,
+    SW_SET_POINT_ACKNOWLEDGE,
+    SW_TARGET_REACHED,
+    TARGET_POSITION,
+    VELOCITY_ACTUAL,
+    state_name,
+)
 from foosball_gym.hardware.config import JointConfig
 from foosball_gym.hardware.safety import DriveFault
 
 logger = logging.getLogger(__name__)
 
-# Objects (CiA 301 communication, CiA 402 drive profile).
-DEVICE_TYPE = 0x1000
-ERROR_REGISTER = 0x1001
-COMMUNICATION_CYCLE_PERIOD = 0x1006
-CONSUMER_HEARTBEAT_TIME = 0x1016
-PRODUCER_HEARTBEAT_TIME = 0x1017
-ABORT_CONNECTION_OPTION_CODE = 0x6007
-CONTROLWORD = 0x6040
-STATUSWORD = 0x6041
-QUICK_STOP_OPTION_CODE = 0x605A
-SHUTDOWN_OPTION_CODE = 0x605B
-DISABLE_OPERATION_OPTION_CODE = 0x605C
-FAULT_REACTION_OPTION_CODE = 0x605E
-MODES_OF_OPERATION = 0x6060
-MODES_OF_OPERATION_DISPLAY = 0x6061
-POSITION_ACTUAL = 0x6064
-VELOCITY_ACTUAL = 0x606C
-TARGET_POSITION = 0x607A
-PROFILE_VELOCITY = 0x6081
-PROFILE_ACCELERATION = 0x6083
-PROFILE_DECELERATION = 0x6084
-QUICK_STOP_DECELERATION = 0x6085
-INTERPOLATION_TIME_PERIOD = 0x60C2
-SUPPORTED_DRIVE_MODES = 0x6502
-
-# Controlword commands and bits.
-CW_DISABLE_VOLTAGE = State402.CW_DISABLE_VOLTAGE  # 0x00
-CW_QUICK_STOP = State402.CW_QUICK_STOP  # 0x02
-CW_SHUTDOWN = State402.CW_SHUTDOWN  # 0x06
-CW_SWITCH_ON = State402.CW_SWITCH_ON  # 0x07
-CW_ENABLE_OPERATION = State402.CW_OPERATION_ENABLED  # 0x0F
-CW_FAULT_RESET = 0x80
-CW_NEW_SET_POINT = 0x10  # pp: a rising edge hands the target position to the drive
-CW_CHANGE_IMMEDIATELY = 0x20  # pp: the new target replaces the current one at once
-
-# Statusword bits.
-SW_FAULT = 0x0008
-SW_TARGET_REACHED = 0x0400  # in QUICK STOP ACTIVE: the drive has halted
-SW_SET_POINT_ACKNOWLEDGE = 0x1000  # pp
-
-MODE_CODES = {"pp": 1, "csp": 8}
-DEVICE_PROFILE = 402
-# 0x605A = 6: slow down on the quick stop ramp, then stay in QUICK STOP ACTIVE, holding the
-# position under power (a stopped rod holds still rather than being free to swing).
-QUICK_STOP_AND_HOLD = 6
-# 0x605B, 0x605C = 1: slow down on the slow-down ramp, then switch the power stage off.
-SLOW_DOWN_THEN_DISABLE = 1
-# 0x605E = 2: the fault reaction brakes on the quick stop ramp.
-FAULT_REACTION_QUICK_STOP = 2
-# 0x6007 = 3: a lost connection to the master (its heartbeat) quick-stops the drive.
-ABORT_CONNECTION_QUICK_STOP = 3
-CONSUMER_HEARTBEAT_ENTRIES = 4
 # A drive turning slower than this fraction of its joint's top speed counts as standing still.
 STANDSTILL_FRACTION = 0.001
 # The wait for standstill ends at this multiple of the ramp's length plus STOP_SLACK_S, whatever
@@ -133,118 +74,8 @@ STANDSTILL_FRACTION = 0.001
 STOP_TIME_FACTOR = 1.5
 STOP_SLACK_S = 0.05
 
-OPERATION_ENABLED = "OPERATION ENABLED"
-NMT_OPERATIONAL = 5
-NMT_BOOT_UP = 0
 
-_STATE_MASKS = tuple(State402.SW_MASK.items())
-
-
-def state_name(statusword: int) -> str:
-    """The CiA 402 state a statusword shows (``"OPERATION ENABLED"``, ``"FAULT"``, ...)."""
-    for name, (mask, value) in _STATE_MASKS:
-        if statusword & mask == value:
-            return name
-    return "UNKNOWN"
-
-
-def _variable(
-    name: str, index: int, subindex: int, data_type: int, access: str = "rw", default: int = 0
-) -> ODVariable:
-    var = ODVariable(name, index, subindex)
-    var.data_type = data_type
-    var.access_type = access
-    var.default = default
-    return var
-
-
-def object_dictionary(node_id: int) -> ObjectDictionary:
-    """The objects of a CiA 402 position drive this package uses, for one node.
-
-    Enough for a master to address a real C5-E and for a ``canopen.LocalNode`` to play one:
-    device type, error register, cycle period, producer and consumer heartbeat, 4 RPDOs and 4
-    TPDOs (all disabled and empty, as after a reset to factory settings), the stop reactions
-    (option codes) and the drive objects of both modes.
-    """
-    od = ObjectDictionary()
-    od.node_id = node_id
-    for var in (
-        # Bits 16-23 = 2: a servo drive.
-        _variable("Device type", DEVICE_TYPE, 0, UNSIGNED32, "ro", (2 << 16) | DEVICE_PROFILE),
-        _variable("Error register", ERROR_REGISTER, 0, UNSIGNED8, "ro"),
-        _variable("Communication cycle period", COMMUNICATION_CYCLE_PERIOD, 0, UNSIGNED32),
-        _variable("Producer heartbeat time", PRODUCER_HEARTBEAT_TIME, 0, UNSIGNED16),
-        _variable("Controlword", CONTROLWORD, 0, UNSIGNED16),
-        _variable("Statusword", STATUSWORD, 0, UNSIGNED16, "ro"),
-        _variable(
-            "Abort connection option code", ABORT_CONNECTION_OPTION_CODE, 0, INTEGER16, default=1
-        ),
-        _variable("Quick stop option code", QUICK_STOP_OPTION_CODE, 0, INTEGER16, default=2),
-        _variable("Shutdown option code", SHUTDOWN_OPTION_CODE, 0, INTEGER16),
-        _variable(
-            "Disable operation option code", DISABLE_OPERATION_OPTION_CODE, 0, INTEGER16, default=1
-        ),
-        _variable(
-            "Fault reaction option code", FAULT_REACTION_OPTION_CODE, 0, INTEGER16, default=2
-        ),
-        _variable("Modes of operation", MODES_OF_OPERATION, 0, INTEGER8),
-        _variable("Modes of operation display", MODES_OF_OPERATION_DISPLAY, 0, INTEGER8, "ro"),
-        _variable("Position actual value", POSITION_ACTUAL, 0, INTEGER32, "ro"),
-        _variable("Velocity actual value", VELOCITY_ACTUAL, 0, INTEGER32, "ro"),
-        _variable("Target position", TARGET_POSITION, 0, INTEGER32),
-        _variable("Profile velocity", PROFILE_VELOCITY, 0, UNSIGNED32),
-        _variable("Profile acceleration", PROFILE_ACCELERATION, 0, UNSIGNED32),
-        _variable("Profile deceleration", PROFILE_DECELERATION, 0, UNSIGNED32),
-        _variable("Quick stop deceleration", QUICK_STOP_DECELERATION, 0, UNSIGNED32),
-        _variable(
-            "Supported drive modes",
-            SUPPORTED_DRIVE_MODES,
-            0,
-            UNSIGNED32,
-            "ro",
-            sum(1 << (code - 1) for code in MODE_CODES.values()),
-        ),
-    ):
-        od.add_object(var)
-    index = CONSUMER_HEARTBEAT_TIME
-    consumers = ODRecord("Consumer heartbeat time", index)
-    consumers.add_member(
-        _variable("Highest sub-index", index, 0, UNSIGNED8, "const", CONSUMER_HEARTBEAT_ENTRIES)
-    )
-    for sub in range(1, CONSUMER_HEARTBEAT_ENTRIES + 1):
-        # Bits 16-23: the node id watched; bits 0-15: its heartbeat timeout in ms (0: off).
-        consumers.add_member(_variable(f"Consumer heartbeat {sub}", index, sub, UNSIGNED32))
-    od.add_object(consumers)
-    index = INTERPOLATION_TIME_PERIOD
-    interpolation = ODRecord("Interpolation time period", index)
-    interpolation.add_member(_variable("Highest sub-index", index, 0, UNSIGNED8, "const", 2))
-    interpolation.add_member(_variable("Time period units", index, 1, UNSIGNED8))
-    interpolation.add_member(_variable("Time period index", index, 2, INTEGER8, default=-3))
-    od.add_object(interpolation)
-    pdos = (("RPDO", 0x1400, 0x1600, 0x200), ("TPDO", 0x1800, 0x1A00, 0x180))
-    for n in range(4):
-        for kind, com, mapping, cob_base in pdos:
-            index = com + n
-            record = ODRecord(f"{kind}{n + 1} communication parameter", index)
-            subs = 5 if kind == "TPDO" else 2
-            record.add_member(_variable("Highest sub-index", index, 0, UNSIGNED8, "const", subs))
-            cob_id = (1 << 31) | (cob_base + 0x100 * n + node_id)  # bit 31: not valid
-            record.add_member(_variable("COB-ID", index, 1, UNSIGNED32, default=cob_id))
-            record.add_member(_variable("Transmission type", index, 2, UNSIGNED8, default=255))
-            if kind == "TPDO":
-                record.add_member(_variable("Inhibit time", index, 3, UNSIGNED16))
-                record.add_member(_variable("Event timer", index, 5, UNSIGNED16))
-            od.add_object(record)
-            index = mapping + n
-            record = ODRecord(f"{kind}{n + 1} mapping parameter", index)
-            record.add_member(_variable("Number of mapped objects", index, 0, UNSIGNED8))
-            for sub in range(1, 9):
-                record.add_member(_variable(f"Mapped object {sub}", index, sub, UNSIGNED32))
-            od.add_object(record)
-    return od
-
-
-class Cia402Drive:
+class Cia402Drive(DriveLink):
     """One drive of the table, through a ``canopen.RemoteNode``.
 
     Args:
@@ -277,109 +108,18 @@ class Cia402Drive:
     ) -> None:
         if mode not in MODE_CODES:
             raise ValueError(f"unknown drive mode {mode!r}; allowed: {', '.join(MODE_CODES)}")
-        self.joint = joint
         self.mode = mode
         self.control_hz = control_hz
         self.heartbeat_timeout_s = heartbeat_timeout_s
         self.master_node_id = master_node_id
-        # An SDO client serves one transfer at a time; a quick stop from the guard's thread
-        # must also never land inside the play loop's set-point handshake, whose last write
-        # would enable the drive again.
-        self._lock = threading.RLock()
-        self.node = canopen.RemoteNode(joint.node_id, object_dictionary(joint.node_id))
-        network.add_node(self.node)
-        self.network = network
+        super().__init__(network, joint)
         #: True from a finished bring-up to the next stop: a drive that leaves "operation
         #: enabled" in between is at fault.
         self.enabled = False
         self._pdo = False
-        # What the receive thread reports; guarded by this condition's lock.
-        self._changed = threading.Condition()
-        self._statusword: int | None = None
-        self._position: int | None = None
-        self._velocity: int | None = None
-        self._mode_display: int | None = None
-        self._received = [0, 0]  # TPDO1, TPDO2 so far
+        # Guarded by the receive condition's lock, as what the receive thread reports is.
         self._sync_mark: tuple[int, int] | None = None
-        self._emcy: EmcyError | None = None
-        self._heartbeat_at: float | None = None
-        self._heartbeat_state: int | None = None
         self._expect_nmt: int | None = None
-        self.node.emcy.add_callback(self._on_emcy)
-        self.node.nmt.add_heartbeat_callback(self._on_heartbeat)
-        self.node.tpdo[1].add_callback(self._on_tpdo1)
-        self.node.tpdo[2].add_callback(self._on_tpdo2)
-        self._rpdo = self.node.rpdo[1]
-        self._target: canopen.pdo.PdoVariable | None = None  # RPDO1's target, once mapped
-
-    # ------------------------------------------------------------------ receive thread
-
-    def _on_emcy(self, error: EmcyError) -> None:
-        if error.code & 0xFF00 == 0:
-            return  # "error reset / no error": it clears nothing the master has seen
-        with self._changed:
-            if self._emcy is None:
-                self._emcy = error
-
-    def _on_heartbeat(self, state: int) -> None:
-        with self._changed:
-            self._heartbeat_at = time.monotonic()
-            self._heartbeat_state = state
-            self._changed.notify_all()
-
-    def _on_tpdo1(self, pdo: canopen.pdo.PdoMap) -> None:
-        statusword, position = struct.unpack_from("<Hi", pdo.data)
-        with self._changed:
-            self._statusword, self._position = statusword, position
-            self._received[0] += 1
-            self._changed.notify_all()
-
-    def _on_tpdo2(self, pdo: canopen.pdo.PdoMap) -> None:
-        velocity, mode = struct.unpack_from("<ib", pdo.data)
-        with self._changed:
-            self._velocity, self._mode_display = velocity, mode
-            self._received[1] += 1
-            self._changed.notify_all()
-
-    # ------------------------------------------------------------------ SDO helpers
-
-    @contextlib.contextmanager
-    def _talking(self, what: str) -> Iterator[None]:
-        """Turn the bus's and the SDO client's errors into a :class:`DriveFault`."""
-        try:
-            yield
-        except (SdoError, NmtError, can.CanError) as e:
-            raise DriveFault(self.joint, f"{what} failed: {e}") from e
-
-    def _read(self, index: int, subindex: int | None = None) -> int:
-        with self._lock, self._talking(f"reading 0x{index:04X}"):
-            obj = self.node.sdo[index]
-            return (obj if subindex is None else obj[subindex]).raw
-
-    def _write(self, index: int, value: int, subindex: int | None = None) -> None:
-        with self._lock, self._talking(f"writing 0x{index:04X} = {value}"):
-            obj = self.node.sdo[index]
-            (obj if subindex is None else obj[subindex]).raw = value
-
-    def _read_statusword(self) -> int:
-        statusword = self._read(STATUSWORD)
-        with self._changed:
-            self._statusword = statusword
-        return statusword
-
-    def _wait_for_state(self, target: str, what: str) -> None:
-        deadline = time.monotonic() + self.STATE_TIMEOUT_S
-        while True:
-            statusword = self._read_statusword()
-            if state_name(statusword) == target:
-                return
-            if time.monotonic() > deadline:
-                raise DriveFault(
-                    self.joint,
-                    f"did not reach {target} after {what} (it is in {state_name(statusword)}, "
-                    f"statusword 0x{statusword:04X})",
-                )
-            time.sleep(self.POLL_S)
 
     # ------------------------------------------------------------------ bring-up
 
@@ -388,9 +128,10 @@ class Cia402Drive:
 
         NMT pre-operational; check it is a CiA 402 device; fault reset or disable down to
         "switch on disabled"; heartbeats (its own, and watching the master's), the stop
-        reactions and ramps (see the module's docstring), the mode's PDOs or profile; mode of
-        operation, checked on its display; target = actual position, so it does not move; NMT
-        operational (confirmed by its heartbeat); shutdown, switch on, enable operation.
+        reactions and ramps (see :mod:`~foosball_gym.hardware.cia402.bring_up`), the mode's
+        PDOs or profile; mode of operation, checked on its display; target = actual position,
+        so it does not move; NMT operational (confirmed by its heartbeat); shutdown, switch
+        on, enable operation.
 
         Returns:
             The joint's position (m or rad) when it was enabled.
@@ -412,30 +153,14 @@ class Cia402Drive:
             # Whatever it reported before the reset is history now.
             self._emcy = None
         joint = self.joint
-        period_ms = max(1, round(self.heartbeat_timeout_s * 1000 / 3))
-        self._write(PRODUCER_HEARTBEAT_TIME, period_ms)
-        if self.master_node_id is not None:
-            timeout_ms = min(0xFFFF, max(1, round(self.heartbeat_timeout_s * 1000)))
-            self._write(
-                CONSUMER_HEARTBEAT_TIME, (self.master_node_id << 16) | timeout_ms, subindex=1
-            )
-            self._write(ABORT_CONNECTION_OPTION_CODE, ABORT_CONNECTION_QUICK_STOP)
-        self._write(QUICK_STOP_OPTION_CODE, QUICK_STOP_AND_HOLD)
-        self._write(SHUTDOWN_OPTION_CODE, SLOW_DOWN_THEN_DISABLE)
-        self._write(DISABLE_OPERATION_OPTION_CODE, SLOW_DOWN_THEN_DISABLE)
-        self._write(FAULT_REACTION_OPTION_CODE, FAULT_REACTION_QUICK_STOP)
-        acceleration = abs(joint.speed_to_increments(joint.max_acceleration))
-        self._write(QUICK_STOP_DECELERATION, acceleration)
-        self._write(PROFILE_DECELERATION, acceleration)
+        for index, subindex, value in stop_settings(
+            joint, self.heartbeat_timeout_s, self.master_node_id
+        ):
+            self._write(index, value, subindex=subindex)
         if self.mode == "csp":
-            self._configure_pdos()
-            self._write(COMMUNICATION_CYCLE_PERIOD, round(1e6 / self.control_hz))
-            # The SYNC period in units of 10^-4 s, the finest an 8-bit count covers at 60 Hz.
-            self._write(INTERPOLATION_TIME_PERIOD, round(1e4 / self.control_hz), subindex=1)
-            self._write(INTERPOLATION_TIME_PERIOD, -4, subindex=2)
-        else:
-            self._write(PROFILE_VELOCITY, abs(joint.speed_to_increments(joint.max_speed)))
-            self._write(PROFILE_ACCELERATION, acceleration)
+            self._map_pdos()
+        for index, subindex, value in mode_settings(joint, self.mode, self.control_hz):
+            self._write(index, value, subindex=subindex)
         self._set_mode()
         position = self._read(POSITION_ACTUAL)
         self._write(TARGET_POSITION, position)
@@ -474,29 +199,8 @@ class Cia402Drive:
             else:
                 self._write(CONTROLWORD, CW_DISABLE_VOLTAGE)
 
-    def _configure_pdos(self) -> None:
-        """RPDO1: target; TPDO1: statusword, position; TPDO2: velocity, mode display.
-
-        The other PDOs are switched off, so nothing else a drive was set up to send competes
-        for the bus. RPDO1 and the TPDOs are synchronous (transmission type 1): the drive
-        takes the target and samples its state on every SYNC.
-        """
-        for pdos in (self.node.rpdo, self.node.tpdo):
-            for pdo in pdos.map.values():
-                pdo.clear()
-                pdo.cob_id = pdo.predefined_cob_id
-                pdo.enabled = False
-                pdo.trans_type = None
-        layout = (
-            (self.node.rpdo[1], (TARGET_POSITION,)),
-            (self.node.tpdo[1], (STATUSWORD, POSITION_ACTUAL)),
-            (self.node.tpdo[2], (VELOCITY_ACTUAL, MODES_OF_OPERATION_DISPLAY)),
-        )
-        for pdo, objects in layout:
-            for index in objects:
-                pdo.add_variable(index)
-            pdo.trans_type = 1
-            pdo.enabled = True
+    def _map_pdos(self) -> None:
+        lay_out_csp_pdos(self.node)
         with self._talking("configuring the PDOs"):
             self.node.rpdo.save()
             self.node.tpdo.save()
@@ -539,6 +243,20 @@ class Cia402Drive:
                     f"(last: {state})",
                 )
             self._expect_nmt = NMT_OPERATIONAL
+
+    def _wait_for_state(self, target: str, what: str) -> None:
+        deadline = time.monotonic() + self.STATE_TIMEOUT_S
+        while True:
+            statusword = self._read_statusword()
+            if state_name(statusword) == target:
+                return
+            if time.monotonic() > deadline:
+                raise DriveFault(
+                    self.joint,
+                    f"did not reach {target} after {what} (it is in {state_name(statusword)}, "
+                    f"statusword 0x{statusword:04X})",
+                )
+            time.sleep(self.POLL_S)
 
     # ------------------------------------------------------------------ every control step
 
