@@ -8,6 +8,7 @@ that uses the simulator.
 
 from __future__ import annotations
 
-from foosball_gym.virtual_table.drives import SimulatedDrive, SimulatedDrives
+from foosball_gym.virtual_table.drive import SimulatedDrive
+from foosball_gym.virtual_table.drives import SimulatedDrives
 
 __all__ = ["SimulatedDrive", "SimulatedDrives"]
