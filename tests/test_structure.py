@@ -200,10 +200,10 @@ def test_no_module_imports_itself_back_through_others():
 
 
 # Layers, lowest first: a module may import its own layer and those below, never one above.
-# The real table (interface, estimation, vision, hardware, play) never reaches the simulator
+# The real table (policy_io, estimation, vision, hardware, play) never reaches the simulator
 # or the environments, whatever the training side does.
 BELOW = {
-    "foosball_gym.interface": {
+    "foosball_gym.policy_io": {
         "foosball_gym.envs",
         "foosball_gym.sim",
         "foosball_gym.sim_table",
@@ -253,7 +253,7 @@ BELOW = {
 def test_no_module_imports_a_layer_above_its_own():
     graph = import_graph(module_files(SOURCES))
     # The check sees the state estimator reach the observation builder, from below.
-    assert "foosball_gym.interface.observations" in graph["foosball_gym.estimation.state"]
+    assert "foosball_gym.policy_io.observations" in graph["foosball_gym.estimation.state"]
     wrong = [
         f"{module} imports {target}"
         for module, targets in graph.items()
@@ -376,7 +376,7 @@ ENV_ROOTS = (
     "foosball_gym.vision",
     "foosball_gym.tasks",
     "foosball_gym.game",
-    "foosball_gym.interface",
+    "foosball_gym.policy_io",
     "foosball_gym.policies",
     "foosball_gym.sim",
     "foosball_gym.table",

@@ -21,8 +21,8 @@ from foosball_gym import table as T
 from foosball_gym.envs.estimated import CameraNoise, EstimatedState
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
 from foosball_gym.game import Game, Policy
-from foosball_gym.interface.observations import JOINT_SETS, check_flag
-from foosball_gym.interface.task import TaskInterface, check_action, residual_action
+from foosball_gym.policy_io.observations import JOINT_SETS, check_flag
+from foosball_gym.policy_io.task import TaskInterface, check_action, residual_action
 from foosball_gym.physics_options import check_physics
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.tasks.base import Task, check_ball_position, check_pair, split_options

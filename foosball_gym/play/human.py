@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.interface.task import Layout, action_joints, check_action
+from foosball_gym.policy_io.task import Layout, action_joints, check_action
 
 Keys = Callable[[], tuple[frozenset[str], frozenset[str]]]
 

@@ -41,8 +41,8 @@ from foosball_gym import table as T
 from foosball_gym.camera import CameraModel, CameraNoise
 from foosball_gym.game import Game
 from foosball_gym.hardware.config import BusConfig, JointConfig, TableConfig
-from foosball_gym.interface.task import TaskInterface
 from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
+from foosball_gym.policy_io.task import TaskInterface
 from foosball_gym.sim import TableSim, drive_acceleration
 from foosball_gym.sim_table.camera_process import CameraProcess, FrameBuffer
 from foosball_gym.sim_table.drives import SimulatedDrives

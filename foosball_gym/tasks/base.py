@@ -2,7 +2,7 @@
 
 A :class:`Task` holds only the task's own options. The game (:mod:`foosball_gym.game`) plays
 it on a simulated table and the environment (:mod:`foosball_gym.envs`) puts a Gymnasium face
-on the game; the real table needs only the task's :class:`~foosball_gym.interface.Layout`.
+on the game; the real table needs only the task's :class:`~foosball_gym.policy_io.Layout`.
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.interface.task import Layout
 from foosball_gym.policies.scripted import ScriptedTeam
+from foosball_gym.policy_io.task import Layout
 
 
 @dataclass

@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.interface.observations import check_flag
-from foosball_gym.interface.task import Layout
+from foosball_gym.policy_io.observations import check_flag
+from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start, Task
 from foosball_gym.tasks.serves import resting_in_front_of
 

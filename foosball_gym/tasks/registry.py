@@ -6,8 +6,8 @@ from typing import Any
 
 import gymnasium as gym
 
-from foosball_gym.interface.observations import OBSERVATION_OPTIONS, observation_options
-from foosball_gym.interface.task import TaskInterface
+from foosball_gym.policy_io.observations import OBSERVATION_OPTIONS, observation_options
+from foosball_gym.policy_io.task import TaskInterface
 from foosball_gym.tasks.base import Task, split_options
 from foosball_gym.tasks.block import BlockTask
 from foosball_gym.tasks.full_game import FullGameTask

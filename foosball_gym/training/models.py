@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym.interface.task import residual_action
+from foosball_gym.policy_io.task import residual_action
 from foosball_gym.training.config import PhysicsMismatchWarning, physics_mismatch
 from foosball_gym.training.files import CONFIG_FILE, LEGACY_NORM_FILE, MODEL_FILE, NORM_FILE
 from foosball_gym.training.snapshot import PolicySnapshot, policy_from_state_dict
