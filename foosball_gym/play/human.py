@@ -65,7 +65,7 @@ def key_map_text() -> str:
 
 def two_player_envs() -> list[str]:
     """The registered environments with an away side a person can play."""
-    from foosball_gym.tasks import TASKS, make_task
+    from foosball_gym.registration import TASKS, make_task
 
     return [env_id for env_id in TASKS if make_task(env_id)[0].layout.opponent]
 

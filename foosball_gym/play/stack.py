@@ -253,8 +253,8 @@ def play_sim(
         ValueError: ``human`` names no away rod of the task (or the task has no away side).
         WindowError: the GUI window could not be opened (no display); a RuntimeError.
     """
+    from foosball_gym.registration import task_interface
     from foosball_gym.sim_table.simulated_table import SimulatedTable, sim_table_config
-    from foosball_gym.tasks import task_interface
 
     if camera_size is None:
         # A paced table renders in the loop's own time: the small frame keeps it near real time.

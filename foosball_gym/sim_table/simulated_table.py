@@ -43,11 +43,11 @@ from foosball_gym.game import Game
 from foosball_gym.hardware.config import BusConfig, JointConfig, TableConfig
 from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
 from foosball_gym.policy_io.task import TaskInterface
+from foosball_gym.registration import interface_of, make_task
 from foosball_gym.sim import TableSim, drive_acceleration
 from foosball_gym.sim_table.camera_process import CameraProcess, FrameBuffer
 from foosball_gym.sim_table.drives import SimulatedDrives
 from foosball_gym.sim_table.viewer_process import ViewerProcess
-from foosball_gym.tasks import interface_of, make_task
 
 # Calibration of the simulated drives: arbitrary but drive-like, and the revolute drive turned
 # round, so that a sign error anywhere between policy and rod shows.

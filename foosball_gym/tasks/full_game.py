@@ -16,9 +16,6 @@ class FullGameTask(Task):
     """All eight rods; a kick-off from a side wall. Success is scoring (in a continuous match:
     being ahead)."""
 
-    options = {"opponent_prismatic_only": (False, True), "continuous": (False, True)}
-    env_defaults = {"stagnation_steps": 60}
-
     def __init__(self, *, continuous: bool = False) -> None:
         self.continuous = check_flag("continuous", continuous)
         self.continues_after_goal = self.continuous

@@ -17,11 +17,6 @@ class KeeperVsKeeperTask(Task):
     """The two keepers; the ball starts at rest in front of one. Success is scoring (in a
     continuous match: being ahead)."""
 
-    options = {"opponent_prismatic_only": (True, False), "continuous": (False, True)}
-    # The real table's camera sees only where the opponent's rod is slid to; a ball lying
-    # still for a second is a draw.
-    env_defaults = {"opponent_prismatic_only": True, "stagnation_steps": 60}
-
     def __init__(self, *, continuous: bool = False) -> None:
         # A match of many serves: two sound keepers rarely score, so one serve a game leaves
         # most games drawn and tells little about which keeper is better.

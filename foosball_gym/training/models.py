@@ -188,7 +188,7 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     residual = float(env_kwargs.pop("residual", 0.0) or 0.0)
     baseline = None
     if residual and env_id is not None:
-        from foosball_gym.catalog import scripted_policy
+        from foosball_gym.registration import scripted_policy
 
         baseline = scripted_policy(env_id, env_kwargs)
     return LoadedPolicy(
