@@ -26,10 +26,10 @@ import time
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.catalog import scripted_policy
 from foosball_gym.evaluation import evaluate, wilson_interval
 from foosball_gym.hardware.safety import SafetyError
 from foosball_gym.play.stack import play_sim
+from foosball_gym.registration import scripted_policy
 from foosball_gym.sim import TableSim
 
 ENV = "Foosball-Block-v0"

@@ -197,7 +197,7 @@ def show_size(value: Sequence[int]) -> str:
 
 def scripted(env_id: str, env_kwargs: dict[str, Any], on_table: bool = False) -> Any:
     """The scripted baseline of an environment (for a table's estimated state: ``on_table``)."""
-    from foosball_gym.catalog import scripted_policy
+    from foosball_gym.registration import scripted_policy
 
     try:
         return scripted_policy(env_id, env_kwargs, on_table)
@@ -221,7 +221,7 @@ def load_model(spec: str, trust: bool = False) -> Any:
 
 def check_model_fits(loaded: Any, env_id: str, env_kwargs: dict[str, Any]) -> None:
     """Fail where a loaded model's observations are not those of the environment it is to play."""
-    from foosball_gym.catalog import check_env_id
+    from foosball_gym.registration import check_env_id
 
     try:
         check_env_id(env_id)

@@ -17,7 +17,7 @@ def add_parser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from foosball_gym.catalog import describe_envs
+    from foosball_gym.registration import describe_envs
 
     print(describe_envs())
     return 0

@@ -154,7 +154,7 @@ def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
 def _check_human(env_id: str, env_kwargs: dict[str, Any], human: str, rod: str | None) -> None:
     """Fail where a person cannot play ``human`` in the environment."""
     from foosball_gym.play.human import human_rod
-    from foosball_gym.tasks import task_interface
+    from foosball_gym.registration import task_interface
 
     try:
         human_rod(env_id, task_interface(env_id, env_kwargs).layout, human)
@@ -171,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
         ) from None
     from foosball_gym.hardware.config import ConfigError, load_config
     from foosball_gym.hardware.safety import SafetyError
-    from foosball_gym.tasks import task_interface
+    from foosball_gym.registration import task_interface
     from foosball_gym.virtual_table.viewer_process import WindowError
 
     human = args.human_rod or ("keeper" if args.human else None)

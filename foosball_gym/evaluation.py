@@ -17,7 +17,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from foosball_gym.catalog import check_env_id
+from foosball_gym.registration import check_env_id
 
 Policy = Callable[[np.ndarray], Any]
 

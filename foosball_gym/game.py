@@ -15,9 +15,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.interface.observations import mirrored_builder
-from foosball_gym.interface.task import Joint, TaskInterface, action_joints, check_action
 from foosball_gym.policies.scripted import ScriptedTeam
+from foosball_gym.policy_io.observations import mirrored_builder
+from foosball_gym.policy_io.task import Joint, TaskInterface, action_joints, check_action
 from foosball_gym.tasks.base import Start, Task, clear_of_ball
 
 if TYPE_CHECKING:

@@ -19,7 +19,7 @@ from foosball_gym.policies.aiming import (
     plan_shot,
 )
 from foosball_gym.policies.scripted import KICK_ANGLE, WIND_UP_ANGLE, ScriptedTeam, slide_for
-from foosball_gym.tasks import task_interface
+from foosball_gym.registration import task_interface
 
 WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
 KEEPER = T.rod("home_keeper")

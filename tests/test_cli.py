@@ -393,7 +393,7 @@ def test_calibrate_finds_the_intrinsics_from_chessboards_and_the_pose_from_the_f
     import cv2
 
     from foosball_gym.hardware.config import load_config, save_config, shipped_table
-    from foosball_gym.tasks import task_interface
+    from foosball_gym.registration import task_interface
     from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
     from foosball_gym.vision import CameraCalibration
 

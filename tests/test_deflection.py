@@ -71,7 +71,7 @@ def test_the_keeper_deflects_only_where_it_sees_the_simulators_own_state():
     # scripted keeper volleys instead (10 % against 49.5 % of incoming balls, measured).
     import gymnasium as gym
 
-    from foosball_gym.catalog import scripted_policy
+    from foosball_gym.registration import scripted_policy
 
     kwargs = {"ball_start": "incoming"}
     exact = gym.make("Foosball-Score-v0", **kwargs)

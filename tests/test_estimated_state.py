@@ -9,7 +9,7 @@ from gymnasium.utils.env_checker import check_env
 
 from foosball_gym import ENV_IDS
 from foosball_gym.envs.estimated import CameraNoise, EstimatedState
-from foosball_gym.tasks import task_interface
+from foosball_gym.registration import task_interface
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)

@@ -9,8 +9,8 @@ import pytest
 from foosball_gym import table as T
 from foosball_gym.camera import CameraModel
 from foosball_gym.estimation import BallFilter, RodFilter, TableStateEstimator, bounce
+from foosball_gym.registration import task_interface
 from foosball_gym.sim import TableSim
-from foosball_gym.tasks import task_interface
 from foosball_gym.vision import CameraCalibration, ColourBallDetector
 
 W, H = 640, 360

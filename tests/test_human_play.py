@@ -25,7 +25,7 @@ from foosball_gym.play.human import (
     human_rod,
     key_map_text,
 )
-from foosball_gym.tasks import task_interface
+from foosball_gym.registration import task_interface
 
 needs_hardware = pytest.mark.skipif(
     any(find_spec(m) is None for m in ("can", "canopen", "cv2", "yaml")),

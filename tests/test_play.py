@@ -19,7 +19,7 @@ from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.hardware.config import load_config, save_config, shipped_table  # noqa: E402
 from foosball_gym.play.session import read_session, replay  # noqa: E402
 from foosball_gym.play.stack import build_perception, play_sim  # noqa: E402
-from foosball_gym.tasks import task_interface  # noqa: E402
+from foosball_gym.registration import task_interface  # noqa: E402
 from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config  # noqa: E402
 from foosball_gym.vision import CameraCalibration  # noqa: E402
 

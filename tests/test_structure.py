@@ -54,7 +54,7 @@ def test_importing_the_package_needs_no_torch_and_registers_the_ids():
 
 def test_a_tasks_interface_is_built_without_the_simulator():
     code = (
-        "import sys; from foosball_gym.tasks import task_interface;"
+        "import sys; from foosball_gym.registration import task_interface;"
         "i = task_interface('Foosball-KeeperVsKeeper-v0');"
         "assert 'pybullet' not in sys.modules, 'pybullet was imported';"
         "print(len(i.builder.names))"
@@ -69,7 +69,7 @@ def test_the_interface_is_the_environments_own():
     import numpy as np
 
     from foosball_gym import ENV_IDS
-    from foosball_gym.tasks import task_interface
+    from foosball_gym.registration import task_interface
 
     for env_id in ENV_IDS:
         for kwargs in ({}, {"joint_velocities": False}):
@@ -200,10 +200,10 @@ def test_no_module_imports_itself_back_through_others():
 
 
 # Layers, lowest first: a module may import its own layer and those below, never one above.
-# The real table (interface, estimation, vision, hardware, play) never reaches the simulator
+# The real table (policy_io, estimation, vision, hardware, play) never reaches the simulator
 # or the environments, whatever the training side does.
 BELOW = {
-    "foosball_gym.interface": {
+    "foosball_gym.policy_io": {
         "foosball_gym.envs",
         "foosball_gym.sim",
         "foosball_gym.virtual_table",
@@ -260,7 +260,7 @@ BELOW = {
 def test_no_module_imports_a_layer_above_its_own():
     graph = import_graph(module_files(SOURCES))
     # The check sees the state estimator reach the observation builder, from below.
-    assert "foosball_gym.interface.observations" in graph["foosball_gym.estimation.state"]
+    assert "foosball_gym.policy_io.observations" in graph["foosball_gym.estimation.state"]
     wrong = [
         f"{module} imports {target}"
         for module, targets in graph.items()
@@ -325,7 +325,7 @@ def run_without_torch(code: str, *args: str, cwd: Path) -> subprocess.CompletedP
 
 def test_evaluation_and_the_scripted_eval_command_need_no_torch(tmp_path):
     code = """
-from foosball_gym.catalog import scripted_policy
+from foosball_gym.registration import scripted_policy
 from foosball_gym.evaluation import EvalResult, evaluate
 
 result = evaluate(scripted_policy("Foosball-Block-v0"), "Foosball-Block-v0", episodes=2)
@@ -377,13 +377,12 @@ def test_every_package_is_listed_for_installation():
 # followed from here (see env_side).
 ENV_ROOTS = (
     "foosball_gym.registration",
-    "foosball_gym.catalog",
     "foosball_gym.envs",
     "foosball_gym.estimation",
     "foosball_gym.vision",
     "foosball_gym.tasks",
     "foosball_gym.game",
-    "foosball_gym.interface",
+    "foosball_gym.policy_io",
     "foosball_gym.policies",
     "foosball_gym.sim",
     "foosball_gym.table",

@@ -8,206 +8,182 @@ actions, observations, reward terms, info, rendering, seeding and domain randomi
 
 from __future__ import annotations
 
-import inspect
-import math
 import time
-from typing import Any, ClassVar
+from collections.abc import Iterable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from foosball_gym import table as T
+from foosball_gym.envs import options as env_options
 from foosball_gym.envs.estimated import CameraNoise, EstimatedState
+from foosball_gym.envs.options import RENDER_MODES
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
 from foosball_gym.game import Game, Policy
-from foosball_gym.interface.observations import JOINT_SETS, check_flag
-from foosball_gym.interface.task import TaskInterface, check_action, residual_action
-from foosball_gym.physics_options import check_physics
 from foosball_gym.policies.scripted import ScriptedTeam
-from foosball_gym.tasks.base import Task, check_ball_position, check_pair, split_options
-from foosball_gym.tasks.registry import interface_of
-from foosball_gym.tasks.serves import check_range
+from foosball_gym.policy_io.observations import check_flag, observation_options
+from foosball_gym.policy_io.task import TaskInterface, check_action, residual_action
+from foosball_gym.tasks.base import Task, check_ball_position, check_pair
 
-RENDER_MODES = ("human", "rgb_array")
-
-
-RESIDUAL_LIMIT = 2.0
-
-
-def check_residual(value: Any) -> float:
-    """The residual scale: 0 (off) up to RESIDUAL_LIMIT, or a ValueError saying so."""
-    try:
-        scale = float(value)
-    except (TypeError, ValueError):
-        scale = math.nan
-    if isinstance(value, bool) or not 0.0 <= scale <= RESIDUAL_LIMIT:
-        raise ValueError(
-            f"residual must be a number in [0, {RESIDUAL_LIMIT}] (0: off), got {value!r}"
-        )
-    return scale
+__all__ = ["RENDER_MODES", "FoosballEnv"]
 
 
 class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
-    """Base class of the foosball tasks; see the task classes for what each one is.
+    """The base of the foosball environments: what every one of them takes and does.
 
-    Keyword arguments every task takes:
+    Each environment's class (:class:`~foosball_gym.envs.block.BlockEnv`,
+    :class:`~foosball_gym.envs.score.ScoreEnv`,
+    :class:`~foosball_gym.envs.keeper_vs_keeper.KeeperVsKeeperEnv`,
+    :class:`~foosball_gym.envs.full_game.FullGameEnv`) lists its options in its signature, with
+    their defaults, and describes its task and its own options; the options several of them
+    take are described here.
 
-    Rewards (SPEC §3; every term is also in ``info["reward_<name>"]``):
-        goal_reward: +weight for a goal scored, -weight for one conceded (1000).
-        out_of_table_penalty: -weight when the ball leaves the table upwards (1000).
-        ball_to_goal_weight: weight of the ball-to-opponent-goal potential (0: off).
-        figurine_to_ball_weight: weight of the figurine-to-ball potential (0: off).
-        action_regularisation_weight: weight of -mean((a_t - a_{t-1})^2) (0: off).
-        shaping: ``"difference"`` (the authors' per-step difference of the potentials) or
-            ``"potential"`` (gamma * phi(s') - phi(s), which keeps the optimal policy).
-        gamma: discount of potential-based shaping (0.99).
+    ## Arguments
+    Rewards (every term is also in `info["reward_<name>"]`; the reward is their sum):
+
+    - `goal_reward`: the weight of a goal: `+goal_reward` for one scored, `-goal_reward` for
+      one conceded.
+    - `out_of_table_penalty`: `-out_of_table_penalty` when the ball leaves the table upwards.
+    - `ball_to_goal_weight`: the weight of the potential of the ball's distance to the
+      opponent's goal (0: off).
+    - `figurine_to_ball_weight`: the weight of the potential of the controlled figurines'
+      distance to the ball (0: off).
+    - `action_regularisation_weight`: the weight of `-mean((a_t - a_{t-1})^2)`, which
+      penalises jerky actions (0: off).
+    - `shaping`: how the potentials are rewarded. `"difference"` is the authors' per-step
+      difference `w * (phi(s') - phi(s))`; `"potential"` is potential-based shaping
+      `w * (gamma * phi(s') - phi(s))`, which leaves the optimal policy unchanged.
+    - `gamma`: the discount of potential-based shaping, in [0, 1].
 
     Observation:
-        joint_velocities: include the rods' velocities (True).
-        observe_figurines: figurine centres (x, y) instead of joint values (False).
-        opponent_prismatic_only: observe only the opponent's prismatic joints, as the real
-            table's camera does (tasks with an opponent only).
 
-    Domain randomisation (each off by default; a (low, high) range turns it on, sampled
-    uniformly at every reset):
-        ball_friction_range: the ball's friction coefficient (spec: 0.1).
-        ball_restitution_range: the restitution of every ball contact (spec: 0.5).
-        ball_mass_range: the ball's mass in kg (spec: 0.022).
-        drive_gain_range: a factor on the drives' position gains: how briskly they respond.
-        rolling_resistance_range: how a rolling ball slows, in units of g (default 0.01).
+    - `joint_velocities`: observe the rods' velocities as well as their positions.
+    - `observe_figurines`: observe the figurines' centres (x, y) and their velocities instead
+      of the rods' joint values.
+    - `opponent_prismatic_only`: observe only the prismatic joints of the opponent's rods, as
+      the real table's camera sees them. Tasks without an opponent take only `False`.
 
-    Robust training (off by default):
-        estimated_state: observe the ball and the opponent's rods as the real table does:
-            through a simulated camera and the real table's Kalman filter
-            (:mod:`foosball_gym.envs.estimated`).
-        camera_noise: the simulated camera's errors, keys of
-            :class:`~foosball_gym.camera.CameraNoise` (fps, position_std, rod_std,
-            drop_rate, hide_under_figurines, latency_s).
+    The game:
 
-    Residual learning (off by default):
-        residual: where above 0, the action is a correction to the task's scripted baseline:
-            the rods are sent ``clip(scripted(obs) + residual * action, -1, 1)``, ``obs`` being
-            the observation the action answers. An untrained policy (actions near 0) plays
-            like the baseline; learning improves on it instead of re-learning it. At most 2.
+    - `opponent`: the away side's policy, a callable from the mirrored observation (the game
+      as the away side sees it from its own goal) to an action in [-1, 1]; `None` is the
+      scripted team. `set_opponent(policy)` swaps it between episodes.
+    - `stagnation_steps`: end the game as a draw once the ball has lain still (slower than
+      5 cm/s) for this many steps; 0 never does.
 
-    Other:
-        opponent: the away side's policy, a callable from the mirrored observation to an
-            action (tasks with an opponent only; default: the scripted team).
-        stagnation_steps: end the game as a draw when the ball has lain still for this many
-            steps (0: never).
-        render_mode: ``None``, ``"rgb_array"`` or ``"human"`` (the PyBullet GUI).
-        render_width, render_height: size of ``"rgb_array"`` frames (320 x 180).
-        physics_hz: physics rate away from contacts (240); near a contact the simulator
-            steps finer (see ``contact_travel``). A whole multiple of ``control_hz``.
-        control_hz: env steps per second (60).
-        contact_travel: near a possible contact, physics steps are made fine enough that
-            nothing moves more than this (m) relative to what it may touch within one (0.005).
-        rolling_resistance: how a rolling ball slows, in units of g (0.01: a 1 m/s ball rolls
-            about 5 m).
+    Domain randomisation, each off at `None`; a range `(low, high)` turns it on, drawn
+    uniformly at every reset (the values drawn are in the reset's `info["dynamics"]`):
+
+    - `ball_friction_range`: the ball's friction coefficient (the table's is 0.1), within
+      [0, 10].
+    - `ball_restitution_range`: the restitution of every contact of the ball (0.5), within
+      [0, 1].
+    - `ball_mass_range`: the ball's mass in kg (0.022), within [0.0001, 1].
+    - `drive_gain_range`: a factor on the drives' position gains, how briskly they respond,
+      within [0.001, 10].
+    - `rolling_resistance_range`: how a rolling ball slows, in units of g, within [0, 0.5];
+      it overrides `rolling_resistance`.
+
+    Robust training:
+
+    - `estimated_state`: observe the ball and the opponent's rods as the real table does,
+      through a simulated camera and the real table's Kalman filter
+      (`foosball_gym.envs.estimated`).
+    - `camera_noise`: the simulated camera's errors, a dict of the fields of
+      `foosball_gym.camera.CameraNoise` (`fps`, `position_std`, `rod_std`, `drop_rate`,
+      `hide_under_figurines`, `latency_s`); needs `estimated_state=True`.
+    - `residual`: above 0, the action corrects the task's scripted baseline, at most 2. The
+      rods are sent `clip(scripted(obs) + residual * action, -1, 1)`, `obs` being the
+      observation the action answers: an untrained policy (actions near 0) plays like the
+      baseline, and learning improves on it instead of learning it afresh.
+
+    Rendering:
+
+    - `render_mode`: `None`, `"rgb_array"` (a top view) or `"human"` (the PyBullet GUI, kept
+      to real time).
+    - `render_width`, `render_height`: the size of `"rgb_array"` frames in pixels.
+
+    Physics:
+
+    - `physics_hz`: the physics rate away from contacts, a whole multiple of `control_hz`.
+      Near a possible contact the simulator steps finer (see `contact_travel`).
+    - `control_hz`: environment steps per second; the time limits count these steps.
+    - `contact_travel`: near a possible contact, physics steps are made fine enough that
+      nothing moves further than this (m) relative to what it may touch, within
+      [0.0001, 0.02].
+    - `rolling_resistance`: how a rolling ball slows, in units of g (0.01: a ball rolling at
+      1 m/s stops after about 5 m), within [0, 0.5].
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": T.CONTROL_HZ}
-    #: The task this environment plays; its options are keyword arguments of the env too.
-    task_class: ClassVar[type[Task]]
 
-    @classmethod
-    def option_grid(cls) -> dict[str, tuple[Any, ...]]:
-        """Every discrete option of this task with its values: what the tests iterate over."""
-        return {
-            "joint_velocities": (True, False),
-            "observe_figurines": (False, True),
-            "estimated_state": (False, True),
-            **cls.task_class.options,
-        }
+    def __new__(cls, *args: Any, **options: Any) -> FoosballEnv:
+        cls.check_option_names(options)
+        return super().__new__(cls)
 
     @classmethod
     def option_defaults(cls) -> dict[str, Any]:
-        """Every keyword argument this environment takes, with its default."""
-        task = inspect.signature(cls.task_class.__init__).parameters
-        env = inspect.signature(cls._setup).parameters
-        defaults = {
-            name: p.default
-            for params in (task, env)
-            for name, p in params.items()
-            if p.default is not inspect.Parameter.empty
-        }
-        return {**defaults, **cls.task_class.env_defaults}
+        """Every option this environment takes, with its default: its keyword arguments."""
+        return env_options.option_defaults(cls)
 
-    def __init__(self, **kwargs: Any) -> None:
-        allowed = self.option_defaults()
-        unknown = sorted(set(kwargs) - set(allowed))
-        if unknown:
-            raise TypeError(
-                f"{type(self).__name__} has no option {', '.join(map(repr, unknown))}; "
-                f"allowed: {', '.join(sorted(allowed))}"
-            )
-        task_kwargs, env_kwargs = split_options(self.task_class, kwargs)
-        self._closed = False
-        self._setup(self.task_class(**task_kwargs), **env_kwargs)
+    @classmethod
+    def option_grid(cls) -> dict[str, tuple[Any, ...]]:
+        """Every option that takes one of a few values, with those values, the default first:
+        what the tests iterate over."""
+        return env_options.option_grid(cls)
 
-    def _setup(
+    @classmethod
+    def argument_docs(cls) -> dict[str, str]:
+        """Each option's entry in the "Arguments" of this class's docstring or its base's."""
+        return env_options.argument_docs(cls)
+
+    @classmethod
+    def check_option_names(cls, names: Iterable[str]) -> None:
+        """Raise TypeError naming any of ``names`` this environment does not take, and those
+        it does."""
+        env_options.check_option_names(cls, names)
+
+    def __init__(
         self,
         task: Task,
         *,
-        opponent: Policy | None = None,
-        goal_reward: float = 1000.0,
-        out_of_table_penalty: float = 1000.0,
-        ball_to_goal_weight: float = 0.0,
-        figurine_to_ball_weight: float = 0.0,
-        action_regularisation_weight: float = 0.0,
-        shaping: str = "difference",
-        gamma: float = 0.99,
-        joint_velocities: bool = True,
-        observe_figurines: bool = False,
-        opponent_prismatic_only: bool = False,
-        stagnation_steps: int = 0,
-        ball_friction_range: tuple[float, float] | None = None,
-        ball_restitution_range: tuple[float, float] | None = None,
-        ball_mass_range: tuple[float, float] | None = None,
-        drive_gain_range: tuple[float, float] | None = None,
-        rolling_resistance_range: tuple[float, float] | None = None,
-        estimated_state: bool = False,
-        camera_noise: dict[str, Any] | None = None,
-        residual: float = 0.0,
-        render_mode: str | None = None,
-        render_width: int = 320,
-        render_height: int = 180,
-        physics_hz: int = T.PHYSICS_HZ,
-        control_hz: int = T.CONTROL_HZ,
-        contact_travel: float = T.CONTACT_TRAVEL,
-        rolling_resistance: float = T.ROLLING_RESISTANCE,
+        opponent: Policy | None,
+        goal_reward: float,
+        out_of_table_penalty: float,
+        ball_to_goal_weight: float,
+        figurine_to_ball_weight: float,
+        action_regularisation_weight: float,
+        shaping: str,
+        gamma: float,
+        joint_velocities: bool,
+        observe_figurines: bool,
+        opponent_prismatic_only: bool,
+        stagnation_steps: int,
+        ball_friction_range: tuple[float, float] | None,
+        ball_restitution_range: tuple[float, float] | None,
+        ball_mass_range: tuple[float, float] | None,
+        drive_gain_range: tuple[float, float] | None,
+        rolling_resistance_range: tuple[float, float] | None,
+        estimated_state: bool,
+        camera_noise: dict[str, Any] | None,
+        residual: float,
+        render_mode: str | None,
+        render_width: int,
+        render_height: int,
+        physics_hz: int,
+        control_hz: int,
+        contact_travel: float,
+        rolling_resistance: float,
     ) -> None:
-        layout = task.layout
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(
-                f"unknown render_mode {render_mode!r}; allowed: None, "
-                f"{', '.join(map(repr, RENDER_MODES))}"
-            )
-        if layout.joints not in JOINT_SETS:
-            raise ValueError(
-                f"unknown joint set {layout.joints!r}; allowed: {', '.join(JOINT_SETS)}"
-            )
-        physics_hz, control_hz, contact_travel, rolling_resistance = check_physics(
-            physics_hz, control_hz, contact_travel, rolling_resistance
-        )
-        for name, value in (
-            ("render_width", render_width),
-            ("render_height", render_height),
-        ):
-            if not isinstance(value, (int, np.integer)) or value <= 0:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if not isinstance(stagnation_steps, (int, np.integer)) or stagnation_steps < 0:
-            raise ValueError(
-                f"stagnation_steps must be a non-negative integer, got {stagnation_steps!r}"
-            )
-        if opponent is not None and not layout.opponent:
-            raise ValueError(f"{type(self).__name__} has no opponent to set")
+        self._closed = False
         self.task = task
-        self.layout = layout
-        self.render_mode = render_mode
-        self.render_width, self.render_height = int(render_width), int(render_height)
-        self.metadata = {**self.metadata, "render_fps": control_hz}
+        self.layout = layout = task.layout
+        self.render_mode, self.render_width, self.render_height = env_options.check_render(
+            render_mode, render_width, render_height
+        )
+        stagnation_steps = env_options.check_stagnation(stagnation_steps)
         self.weights = RewardWeights(
             goal=goal_reward,
             out_of_table=out_of_table_penalty,
@@ -217,28 +193,28 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             shaping=shaping,
             gamma=gamma,
         )
-        self.interface: TaskInterface = interface_of(
-            task,
-            {
-                "joint_velocities": joint_velocities,
-                "observe_figurines": observe_figurines,
-                "opponent_prismatic_only": opponent_prismatic_only,
-            },
+        self.interface: TaskInterface = TaskInterface.create(
+            layout,
+            task.extras,
+            observation_options(
+                bool(layout.opponent),
+                joint_velocities=joint_velocities,
+                observe_figurines=observe_figurines,
+                opponent_prismatic_only=opponent_prismatic_only,
+            ),
         )
         self.observation_options = self.interface.builder.options
         self.obs_builder = self.interface.builder
         self.observation_space = self.obs_builder.space
-        self.randomisation = {
-            name: check_range(name, value, low, high)
-            for name, value, low, high in (
-                ("ball_friction_range", ball_friction_range, 0.0, 10.0),
-                ("ball_restitution_range", ball_restitution_range, 0.0, 1.0),
-                ("ball_mass_range", ball_mass_range, 1e-4, 1.0),
-                ("drive_gain_range", drive_gain_range, 1e-3, 10.0),
-                ("rolling_resistance_range", rolling_resistance_range, 0.0, 0.5),
-            )
-            if value is not None
-        }
+        self.randomisation = env_options.check_randomisation(
+            {
+                "ball_friction_range": ball_friction_range,
+                "ball_restitution_range": ball_restitution_range,
+                "ball_mass_range": ball_mass_range,
+                "drive_gain_range": drive_gain_range,
+                "rolling_resistance_range": rolling_resistance_range,
+            }
+        )
         self._estimated: EstimatedState | None = None
         if check_flag("estimated_state", estimated_state):
             self._estimated = EstimatedState(
@@ -248,14 +224,14 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise ValueError("camera_noise needs estimated_state=True")
         self._n_act = self.interface.n_actions
         self.action_space = spaces.Box(-1.0, 1.0, shape=(self._n_act,), dtype=np.float32)
-        self.residual = check_residual(residual)
+        self.residual = env_options.check_residual(residual)
         # Residual RL: the action corrects the scripted baseline, which sees what the agent saw.
         self._baseline = self.scripted_policy() if self.residual else None
         self._last_obs: np.ndarray | None = None
         self._rewards = RewardComputer(self.weights, [T.rod(r) for r in layout.controlled])
-        self.dt = 1.0 / control_hz
 
-        # Imported here: building a task's interface needs no simulator.
+        # Imported here: building a task's interface needs no simulator. The simulator checks
+        # the physics options.
         from foosball_gym.sim import TableSim
 
         self.sim = TableSim(
@@ -266,12 +242,20 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             rolling_resistance=rolling_resistance,
             gui=render_mode == "human",
         )
+        self.dt = self.sim.control_dt
+        self.metadata = {**self.metadata, "render_fps": self.sim.control_hz}
         self._base_gains = (self.sim.slide_gain, self.sim.spin_gain)
-        self.game = Game(
-            task, self.interface, self.sim, opponent=opponent, stagnation_steps=stagnation_steps
-        )
+        try:
+            self.game = Game(
+                task, self.interface, self.sim, opponent=opponent, stagnation_steps=stagnation_steps
+            )
+        except BaseException:
+            self.close()  # a bad opponent: the simulator is open already
+            raise
         self._last_render = 0.0
         self._started = False
+
+    # ------------------------------------------------------------------ policies
 
     # ------------------------------------------------------------------ policies
 

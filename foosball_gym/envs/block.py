@@ -1,5 +1,9 @@
 """Foosball-Block-v0: the home keeper blocks shots at its goal."""
 
+from __future__ import annotations
+
+from typing import Any, Literal
+
 from foosball_gym.envs.base import FoosballEnv
 from foosball_gym.tasks.block import BlockTask
 
@@ -12,10 +16,10 @@ class BlockEnv(FoosballEnv):
     along its rod to stop it. Only the keeper is in play; its rod does not turn.
 
     ## Action Space
-    ``Box(-1, 1, (1,), float32)``: the keeper's prismatic target, scaled to ±0.123 m.
+    `Box(-1, 1, (1,), float32)`: the keeper's prismatic target, scaled to ±0.123 m.
 
     ## Observation Space
-    ``Box(6,)`` float32, SI units, world frame:
+    `Box(6,)` float32, SI units, world frame:
 
     | index | name | unit |
     |---|---|---|
@@ -26,46 +30,120 @@ class BlockEnv(FoosballEnv):
     | 4 | ball_vx | m/s |
     | 5 | ball_vy | m/s |
 
-    With ``joint_velocities=False`` index 1 is left out. With ``observe_figurines=True`` the
+    With `joint_velocities=False` index 1 is left out. With `observe_figurines=True` the
     keeper's joint values are replaced by its figurine's centre (x, y) and its velocity.
-    ``env.unwrapped.obs_builder.names`` always lists the entries.
+    `env.unwrapped.obs_builder.names` always lists the entries.
 
     ## Rewards
-    ``-goal_reward`` (-1000) when a goal is conceded, ``-out_of_table_penalty`` (-1000) when
+    `-goal_reward` (-1000) when a goal is conceded, `-out_of_table_penalty` (-1000) when
     the ball leaves the table upwards; no shaping by default, as in the authors' blocking task.
-    Every term is in ``info["reward_<name>"]``.
+    Every term is in `info["reward_<name>"]`.
 
     ## Starting State
-    Keeper centred. Ball at x ~ U(``serve_x_range``) = U(0, 0.4), y ~ U(``serve_y_range``) =
-    U(-0.3, 0.3), shot at ``speed_range`` ~ U(2, 7) m/s at a uniform point of the home goal
-    mouth (a goal if nothing stops it). A share ``bank_share`` (default 0) of the shots is
-    aimed off a side wall instead, at the middle of the mouth, allowing for how the simulated
-    wall flattens the path (with the keeper out of the way, 299 of 300 such shots score).
-    What a real opponent plays, and what ``builtin:block`` was trained on, is the wide
-    distribution ``speed_range=(2, 10), serve_x_range=(-0.1, 0.45),
-    serve_y_range=(-0.32275, 0.32275), bank_share=0.5``.
-    ``reset(options={"ball_position": (x, y), "ball_velocity": (vx, vy)})`` places the ball
+    Keeper centred. The ball starts at a uniform point of `serve_x_range` x `serve_y_range`
+    and is shot at a uniform point of the home goal mouth (a goal if nothing stops it), at a
+    speed drawn from `speed_range`. A share `bank_share` of the shots is aimed off a side
+    wall instead, at the middle of the mouth, allowing for how the simulated wall flattens the
+    path (with the keeper out of the way, 299 of 300 such shots score). What a real opponent
+    plays, and what `builtin:block` was trained on, is the wide distribution
+    `speed_range=(2, 10), serve_x_range=(-0.1, 0.45), serve_y_range=(-0.32275, 0.32275),
+    bank_share=0.5`.
+    `reset(options={"ball_position": (x, y), "ball_velocity": (vx, vy)})` places the ball
     exactly; with only a position, the shot is aimed from there.
 
     ## Episode End
     Terminated on a goal (either way) or when the ball leaves the table; truncated after 90
-    steps (1.5 s) by the registered ``TimeLimit``. ``info["is_success"]``: no goal conceded
-    so far. ``info["goal"]``: +1 scored, -1 conceded, 0 none.
+    steps (1.5 s) by the registered `TimeLimit`. `info["is_success"]`: no goal conceded
+    so far. `info["goal"]`: +1 scored, -1 conceded, 0 none.
 
     ## Arguments
-    ``speed_range`` (m/s, at most 30), ``serve_x_range`` (m, within [-0.1, 0.48275]),
-    ``serve_y_range`` (m, within ±0.32275), ``bank_share`` (in [0, 1]), and every keyword
-    of :class:`FoosballEnv` (reward weights,
-    ``shaping``, ``gamma``, ``joint_velocities``, ``observe_figurines``, ``render_mode``,
-    ``render_width``, ``render_height``, and the physics options ``physics_hz``,
-    ``control_hz``, ``contact_travel``, ``rolling_resistance``).
+    - `speed_range`: the shots' speeds in m/s, `(low, high)`, drawn uniformly; at most 30.
+    - `serve_x_range`: where along the table the ball starts, `(low, high)` in m, seen from
+      the goal under fire; within [-0.1, 0.48275].
+    - `serve_y_range`: where across the table the ball starts, `(low, high)` in m; within
+      [-0.32275, 0.32275].
+    - `bank_share`: the share of the shots aimed off a side wall, in [0, 1].
+
+    The other arguments are those every environment takes, described under
+    [FoosballEnv][foosball_gym.envs.base.FoosballEnv]. Block has no opponent:
+    `opponent_prismatic_only` takes only `False`.
 
     ## Version History
     - v0: first version.
     - v0, physics revision 2: the faithful table (README, "The simulated table");
-      ``control_hz`` replaces ``substeps``.
-    - v0: ``serve_x_range``, ``serve_y_range`` and ``bank_share``; their defaults serve what
+      `control_hz` replaces `substeps`.
+    - v0: `serve_x_range`, `serve_y_range` and `bank_share`; their defaults serve what
       v0 always served, seed for seed.
+    - v0: the options are the class's keyword arguments; `opponent`, which Block took only
+      as `None`, is no longer one.
     """
 
-    task_class = BlockTask
+    def __init__(
+        self,
+        *,
+        speed_range: tuple[float, float] = (2.0, 7.0),
+        serve_x_range: tuple[float, float] = (0.0, 0.4),
+        serve_y_range: tuple[float, float] = (-0.3, 0.3),
+        bank_share: float = 0.0,
+        goal_reward: float = 1000.0,
+        out_of_table_penalty: float = 1000.0,
+        ball_to_goal_weight: float = 0.0,
+        figurine_to_ball_weight: float = 0.0,
+        action_regularisation_weight: float = 0.0,
+        shaping: Literal["difference", "potential"] = "difference",
+        gamma: float = 0.99,
+        joint_velocities: bool = True,
+        observe_figurines: bool = False,
+        opponent_prismatic_only: Literal[False] = False,
+        stagnation_steps: int = 0,
+        ball_friction_range: tuple[float, float] | None = None,
+        ball_restitution_range: tuple[float, float] | None = None,
+        ball_mass_range: tuple[float, float] | None = None,
+        drive_gain_range: tuple[float, float] | None = None,
+        rolling_resistance_range: tuple[float, float] | None = None,
+        estimated_state: bool = False,
+        camera_noise: dict[str, Any] | None = None,
+        residual: float = 0.0,
+        render_mode: str | None = None,
+        render_width: int = 320,
+        render_height: int = 180,
+        physics_hz: int = 240,
+        control_hz: int = 60,
+        contact_travel: float = 0.005,
+        rolling_resistance: float = 0.01,
+    ) -> None:
+        super().__init__(
+            BlockTask(
+                speed_range=speed_range,
+                serve_x_range=serve_x_range,
+                serve_y_range=serve_y_range,
+                bank_share=bank_share,
+            ),
+            opponent=None,
+            goal_reward=goal_reward,
+            out_of_table_penalty=out_of_table_penalty,
+            ball_to_goal_weight=ball_to_goal_weight,
+            figurine_to_ball_weight=figurine_to_ball_weight,
+            action_regularisation_weight=action_regularisation_weight,
+            shaping=shaping,
+            gamma=gamma,
+            joint_velocities=joint_velocities,
+            observe_figurines=observe_figurines,
+            opponent_prismatic_only=opponent_prismatic_only,
+            stagnation_steps=stagnation_steps,
+            ball_friction_range=ball_friction_range,
+            ball_restitution_range=ball_restitution_range,
+            ball_mass_range=ball_mass_range,
+            drive_gain_range=drive_gain_range,
+            rolling_resistance_range=rolling_resistance_range,
+            estimated_state=estimated_state,
+            camera_noise=camera_noise,
+            residual=residual,
+            render_mode=render_mode,
+            render_width=render_width,
+            render_height=render_height,
+            physics_hz=physics_hz,
+            control_hz=control_hz,
+            contact_travel=contact_travel,
+            rolling_resistance=rolling_resistance,
+        )

@@ -17,7 +17,7 @@ import numpy as np
 
 from foosball_gym import table as T
 from foosball_gym.camera import CameraNoise
-from foosball_gym.interface.observations import ObservationBuilder
+from foosball_gym.policy_io.observations import ObservationBuilder
 
 __all__ = ["CameraNoise", "EstimatedState"]
 

@@ -1,6 +1,11 @@
 """Foosball-FullGame-v0: all eight rods, the whole game."""
 
+from __future__ import annotations
+
+from typing import Any, Literal
+
 from foosball_gym.envs.base import FoosballEnv
+from foosball_gym.game import Policy
 from foosball_gym.tasks.full_game import FullGameTask
 
 
@@ -12,11 +17,11 @@ class FullGameEnv(FoosballEnv):
     opponent, a policy acting on the mirrored observation, drives the four away rods.
 
     ## Action Space
-    ``Box(-1, 1, (8,), float32)``: for keeper, defense, midfield, offense in turn, the
+    `Box(-1, 1, (8,), float32)`: for keeper, defense, midfield, offense in turn, the
     prismatic target (scaled to the rod's range) and the revolute target (±2π rad).
 
     ## Observation Space
-    ``Box(36,)`` float32:
+    `Box(36,)` float32:
 
     | index | content |
     |---|---|
@@ -26,13 +31,13 @@ class FullGameEnv(FoosballEnv):
     | 24-31 | the same rods' velocities |
     | 32-35 | ball_x, ball_y, ball_vx, ball_vy |
 
-    ``opponent_prismatic_only=True`` keeps only the opponent's prismatic joints (28);
-    ``joint_velocities=False`` drops rod velocities; ``observe_figurines=True`` replaces
-    joint values with figurine centres. ``env.unwrapped.obs_builder.names`` lists the entries.
+    `opponent_prismatic_only=True` keeps only the opponent's prismatic joints (28);
+    `joint_velocities=False` drops rod velocities; `observe_figurines=True` replaces
+    joint values with figurine centres. `env.unwrapped.obs_builder.names` lists the entries.
 
     ## Rewards
-    ``±goal_reward`` (1000) for a goal scored / conceded, ``-out_of_table_penalty`` (1000);
-    no shaping by default (``ball_to_goal_weight`` helps early training).
+    `±goal_reward` (1000) for a goal scored / conceded, `-out_of_table_penalty` (1000);
+    no shaping by default (`ball_to_goal_weight` helps early training).
 
     ## Starting State
     Kick-off from a side wall: the ball at (0, ±0.3) rolling towards the centre line with
@@ -40,19 +45,88 @@ class FullGameEnv(FoosballEnv):
 
     ## Episode End
     Terminated on a goal, when the ball leaves the table, or as a draw when it has lain still
-    for ``stagnation_steps`` (60); truncated after 3600 steps (one minute). With
-    ``continuous=True`` none of these ends the episode: the ball is served again and the score
-    runs on (``info["goals_for"]``, ``info["goals_against"]``) until the time limit, for
-    evaluating whole matches; ``is_success`` is then "ahead on goals".
+    for `stagnation_steps` (60); truncated after 3600 steps (one minute). With
+    `continuous=True` none of these ends the episode: the ball is served again and the score
+    runs on (`info["goals_for"]`, `info["goals_against"]`) until the time limit, for
+    evaluating whole matches; `is_success` is then "ahead on goals".
 
     ## Arguments
-    ``continuous``, ``opponent`` (default: the scripted team), ``stagnation_steps`` and every
-    keyword of :class:`FoosballEnv`. ``set_opponent(policy)`` swaps the opponent.
+    - `continuous`: play a match of many serves instead of one: a goal or a dead ball serves
+      again, and success is being ahead at the time limit.
+
+    The other arguments are those every environment takes, described under
+    [FoosballEnv][foosball_gym.envs.base.FoosballEnv]; `opponent` defaults to the scripted
+    team.
 
     ## Version History
     - v0: first version.
     - v0, physics revision 2: the faithful table (README, "The simulated table");
-      ``control_hz`` replaces ``substeps``.
+      `control_hz` replaces `substeps`.
+    - v0: the options are the class's keyword arguments.
     """
 
-    task_class = FullGameTask
+    def __init__(
+        self,
+        *,
+        continuous: bool = False,
+        opponent: Policy | None = None,
+        goal_reward: float = 1000.0,
+        out_of_table_penalty: float = 1000.0,
+        ball_to_goal_weight: float = 0.0,
+        figurine_to_ball_weight: float = 0.0,
+        action_regularisation_weight: float = 0.0,
+        shaping: Literal["difference", "potential"] = "difference",
+        gamma: float = 0.99,
+        joint_velocities: bool = True,
+        observe_figurines: bool = False,
+        opponent_prismatic_only: bool = False,
+        # A ball lying still for a second is a draw.
+        stagnation_steps: int = 60,
+        ball_friction_range: tuple[float, float] | None = None,
+        ball_restitution_range: tuple[float, float] | None = None,
+        ball_mass_range: tuple[float, float] | None = None,
+        drive_gain_range: tuple[float, float] | None = None,
+        rolling_resistance_range: tuple[float, float] | None = None,
+        estimated_state: bool = False,
+        camera_noise: dict[str, Any] | None = None,
+        residual: float = 0.0,
+        render_mode: str | None = None,
+        render_width: int = 320,
+        render_height: int = 180,
+        physics_hz: int = 240,
+        control_hz: int = 60,
+        contact_travel: float = 0.005,
+        rolling_resistance: float = 0.01,
+    ) -> None:
+        super().__init__(
+            FullGameTask(
+                continuous=continuous,
+            ),
+            opponent=opponent,
+            goal_reward=goal_reward,
+            out_of_table_penalty=out_of_table_penalty,
+            ball_to_goal_weight=ball_to_goal_weight,
+            figurine_to_ball_weight=figurine_to_ball_weight,
+            action_regularisation_weight=action_regularisation_weight,
+            shaping=shaping,
+            gamma=gamma,
+            joint_velocities=joint_velocities,
+            observe_figurines=observe_figurines,
+            opponent_prismatic_only=opponent_prismatic_only,
+            stagnation_steps=stagnation_steps,
+            ball_friction_range=ball_friction_range,
+            ball_restitution_range=ball_restitution_range,
+            ball_mass_range=ball_mass_range,
+            drive_gain_range=drive_gain_range,
+            rolling_resistance_range=rolling_resistance_range,
+            estimated_state=estimated_state,
+            camera_noise=camera_noise,
+            residual=residual,
+            render_mode=render_mode,
+            render_width=render_width,
+            render_height=render_height,
+            physics_hz=physics_hz,
+            control_hz=control_hz,
+            contact_travel=contact_travel,
+            rolling_resistance=rolling_resistance,
+        )

@@ -1,6 +1,11 @@
 """Foosball-KeeperVsKeeper-v0: the two keepers play each other."""
 
+from __future__ import annotations
+
+from typing import Any, Literal
+
 from foosball_gym.envs.base import FoosballEnv
+from foosball_gym.game import Policy
 from foosball_gym.tasks.keeper_vs_keeper import KeeperVsKeeperTask
 
 
@@ -10,14 +15,14 @@ class KeeperVsKeeperEnv(FoosballEnv):
     ## Description
     Only the two keepers are in play. The learner drives the home keeper (slide and spin); the
     opponent, a policy acting on the mirrored observation, drives the away keeper. The paper
-    trains this task by self-play (``foosball_gym.training.SelfPlayCallback``).
+    trains this task by self-play (`foosball_gym.training.SelfPlayCallback`).
 
     ## Action Space
-    ``Box(-1, 1, (2,), float32)``: home keeper prismatic target (±0.123 m) and revolute
+    `Box(-1, 1, (2,), float32)`: home keeper prismatic target (±0.123 m) and revolute
     target (±2π rad).
 
     ## Observation Space
-    ``Box(10,)`` float32 by default (the opponent seen only along its prismatic joint, as
+    `Box(10,)` float32 by default (the opponent seen only along its prismatic joint, as
     the real table's camera sees it):
 
     | index | name | unit |
@@ -30,12 +35,12 @@ class KeeperVsKeeperEnv(FoosballEnv):
     | 5 | away_keeper_slide_vel | m/s |
     | 6-9 | ball_x, ball_y, ball_vx, ball_vy | m, m/s |
 
-    ``opponent_prismatic_only=False`` adds the opponent's spin position and velocity (12);
-    ``joint_velocities=False`` drops every rod velocity; ``observe_figurines=True`` replaces
-    joint values with figurine centres. ``env.unwrapped.obs_builder.names`` lists the entries.
+    `opponent_prismatic_only=False` adds the opponent's spin position and velocity (12);
+    `joint_velocities=False` drops every rod velocity; `observe_figurines=True` replaces
+    joint values with figurine centres. `env.unwrapped.obs_builder.names` lists the entries.
 
     ## Rewards
-    ``±goal_reward`` (1000) for a goal scored / conceded, ``-out_of_table_penalty`` (1000);
+    `±goal_reward` (1000) for a goal scored / conceded, `-out_of_table_penalty` (1000);
     no shaping by default.
 
     ## Starting State
@@ -44,24 +49,93 @@ class KeeperVsKeeperEnv(FoosballEnv):
 
     ## Episode End
     Terminated on a goal, when the ball leaves the table, or as a draw when the ball has lain
-    still for ``stagnation_steps`` (60, one second); truncated after 1800 steps (30 s).
-    With ``continuous=True`` none of these ends the episode: the ball is served again (the
+    still for `stagnation_steps` (60, one second); truncated after 1800 steps (30 s).
+    With `continuous=True` none of these ends the episode: the ball is served again (the
     keepers centred, the ball in front of either) and the score runs on for the whole 30 s;
     success is being ahead then. Two sound keepers mostly draw a single serve; a match gives
     each many chances.
-    ``info``: ``is_success`` (the learner scored), ``goal``, ``goals_for``,
-    ``goals_against``, ``stagnated``.
+    `info`: `is_success` (the learner scored), `goal`, `goals_for`,
+    `goals_against`, `stagnated`.
 
     ## Arguments
-    ``continuous``, ``opponent`` (default: the scripted keeper), ``stagnation_steps`` and
-    every keyword of
-    :class:`FoosballEnv`. ``set_opponent(policy)`` swaps the opponent between episodes.
+    - `continuous`: play a match of many serves instead of one: a goal or a dead ball serves
+      again, and success is being ahead at the time limit.
+
+    The other arguments are those every environment takes, described under
+    [FoosballEnv][foosball_gym.envs.base.FoosballEnv]; `opponent` defaults to the scripted
+    keeper.
 
     ## Version History
     - v0: first version.
     - v0, physics revision 2: the faithful table (README, "The simulated table");
-      ``control_hz`` replaces ``substeps``.
-    - v0: ``continuous``, a match of many serves.
+      `control_hz` replaces `substeps`.
+    - v0: `continuous`, a match of many serves.
+    - v0: the options are the class's keyword arguments.
     """
 
-    task_class = KeeperVsKeeperTask
+    def __init__(
+        self,
+        *,
+        continuous: bool = False,
+        opponent: Policy | None = None,
+        goal_reward: float = 1000.0,
+        out_of_table_penalty: float = 1000.0,
+        ball_to_goal_weight: float = 0.0,
+        figurine_to_ball_weight: float = 0.0,
+        action_regularisation_weight: float = 0.0,
+        shaping: Literal["difference", "potential"] = "difference",
+        gamma: float = 0.99,
+        joint_velocities: bool = True,
+        observe_figurines: bool = False,
+        # The real table's camera sees only where the opponent's rod is slid to.
+        opponent_prismatic_only: bool = True,
+        # A ball lying still for a second is a draw.
+        stagnation_steps: int = 60,
+        ball_friction_range: tuple[float, float] | None = None,
+        ball_restitution_range: tuple[float, float] | None = None,
+        ball_mass_range: tuple[float, float] | None = None,
+        drive_gain_range: tuple[float, float] | None = None,
+        rolling_resistance_range: tuple[float, float] | None = None,
+        estimated_state: bool = False,
+        camera_noise: dict[str, Any] | None = None,
+        residual: float = 0.0,
+        render_mode: str | None = None,
+        render_width: int = 320,
+        render_height: int = 180,
+        physics_hz: int = 240,
+        control_hz: int = 60,
+        contact_travel: float = 0.005,
+        rolling_resistance: float = 0.01,
+    ) -> None:
+        super().__init__(
+            KeeperVsKeeperTask(
+                continuous=continuous,
+            ),
+            opponent=opponent,
+            goal_reward=goal_reward,
+            out_of_table_penalty=out_of_table_penalty,
+            ball_to_goal_weight=ball_to_goal_weight,
+            figurine_to_ball_weight=figurine_to_ball_weight,
+            action_regularisation_weight=action_regularisation_weight,
+            shaping=shaping,
+            gamma=gamma,
+            joint_velocities=joint_velocities,
+            observe_figurines=observe_figurines,
+            opponent_prismatic_only=opponent_prismatic_only,
+            stagnation_steps=stagnation_steps,
+            ball_friction_range=ball_friction_range,
+            ball_restitution_range=ball_restitution_range,
+            ball_mass_range=ball_mass_range,
+            drive_gain_range=drive_gain_range,
+            rolling_resistance_range=rolling_resistance_range,
+            estimated_state=estimated_state,
+            camera_noise=camera_noise,
+            residual=residual,
+            render_mode=render_mode,
+            render_width=render_width,
+            render_height=render_height,
+            physics_hz=physics_hz,
+            control_hz=control_hz,
+            contact_travel=contact_travel,
+            rolling_resistance=rolling_resistance,
+        )

@@ -1,5 +1,9 @@
 """Foosball-Score-v0: the home keeper shoots the ball into the away goal."""
 
+from __future__ import annotations
+
+from typing import Any, Literal
+
 from foosball_gym.envs.base import FoosballEnv
 from foosball_gym.tasks.score import ScoreTask
 
@@ -9,15 +13,15 @@ class ScoreEnv(FoosballEnv):
 
     ## Description
     The home keeper, which can slide and turn, must put the ball into the away goal
-    (x = +0.60). With ``obstacles=True`` the away keeper, defense and offense stand in the way
+    (x = +0.60). With `obstacles=True` the away keeper, defense and offense stand in the way
     at random prismatic positions, still for the whole episode.
 
     ## Action Space
-    ``Box(-1, 1, (2,), float32)``: the keeper's prismatic target (scaled to ±0.123 m) and its
+    `Box(-1, 1, (2,), float32)`: the keeper's prismatic target (scaled to ±0.123 m) and its
     revolute target (scaled to ±2π rad; positive swings the foot towards the away goal).
 
     ## Observation Space
-    ``Box(8,)`` float32 (``Box(11,)`` with obstacles), SI units, world frame:
+    `Box(8,)` float32 (`Box(11,)` with obstacles), SI units, world frame:
 
     | index | name | unit |
     |---|---|---|
@@ -28,37 +32,123 @@ class ScoreEnv(FoosballEnv):
     | 4-7 | ball_x, ball_y, ball_vx, ball_vy | m, m/s |
     | 8-10 | away_keeper, away_defense, away_offense slide_pos (obstacles only) | m |
 
-    ``joint_velocities=False`` leaves out indices 2-3; ``observe_figurines=True`` replaces
-    0-3 with the figurine's centre (x, y) and velocity. ``env.unwrapped.obs_builder.names``
+    `joint_velocities=False` leaves out indices 2-3; `observe_figurines=True` replaces
+    0-3 with the figurine's centre (x, y) and velocity. `env.unwrapped.obs_builder.names`
     always lists the entries.
 
     ## Rewards
-    ``+goal_reward`` (1000) for a goal, ``-goal_reward`` for an own goal,
-    ``-out_of_table_penalty`` (1000) when the ball leaves the table, and action
+    `+goal_reward` (1000) for a goal, `-goal_reward` for an own goal,
+    `-out_of_table_penalty` (1000) when the ball leaves the table, and action
     regularisation with weight 0.5, as in the authors' scoring tasks.
 
     ## Starting State
-    ``ball_start="resting"``: the ball lies still at x = -0.497 ± 0.005, y ~ U(-0.1, 0.1).
-    ``"incoming"``: as Block, shot at the home goal at ``speed_range`` ~ U(3, 7) m/s, from
-    ``serve_x_range`` and ``serve_y_range``, a share ``bank_share`` off a side wall. The keeper
-    starts centred, or just beside the ball if centred would put the figurine inside it.
-    Reset options: ``ball_position``, ``ball_velocity`` and, with obstacles,
-    ``obstacle_positions`` (the three prismatic values, in the order above).
+    `ball_start="resting"`: the ball lies still at x = -0.497 ± 0.005, y ~ U(-0.1, 0.1).
+    `"incoming"`: as in Block, a shot at the home goal from `serve_x_range` x
+    `serve_y_range` at a speed from `speed_range`, a share `bank_share` off a side wall.
+    The keeper starts centred, or just beside the ball if centred would put the figurine
+    inside it. Reset options: `ball_position`, `ball_velocity` and, with obstacles,
+    `obstacle_positions` (the three prismatic values, in the order above).
 
     ## Episode End
     Terminated on a goal either way or when the ball leaves the table; truncated after 180
-    steps. ``info["is_success"]``: a goal was scored.
+    steps. `info["is_success"]`: a goal was scored.
 
     ## Arguments
-    ``ball_start``, ``obstacles``, ``speed_range``, ``serve_x_range``, ``serve_y_range``,
-    ``bank_share`` (see ``Foosball-Block-v0``; they shape incoming balls only) and every
-    keyword of :class:`FoosballEnv`.
+    - `ball_start`: how the ball starts: `"resting"` in front of the keeper, or
+      `"incoming"`, shot at the home goal.
+    - `obstacles`: put the away keeper, defense and offense in the way, still.
+    - `speed_range`: the incoming shots' speeds in m/s, `(low, high)`, drawn uniformly; at
+      most 30.
+    - `serve_x_range`: where along the table an incoming ball starts, `(low, high)` in m,
+      seen from the goal under fire; within [-0.1, 0.48275].
+    - `serve_y_range`: where across the table an incoming ball starts, `(low, high)` in m;
+      within [-0.32275, 0.32275].
+    - `bank_share`: the share of the incoming shots aimed off a side wall, in [0, 1].
+
+    The other arguments are those every environment takes, described under
+    [FoosballEnv][foosball_gym.envs.base.FoosballEnv]. Score has no opponent:
+    `opponent_prismatic_only` takes only `False`.
 
     ## Version History
     - v0: first version.
     - v0, physics revision 2: the faithful table (README, "The simulated table");
-      ``control_hz`` replaces ``substeps``.
-    - v0: ``serve_x_range``, ``serve_y_range`` and ``bank_share``, as Block's.
+      `control_hz` replaces `substeps`.
+    - v0: `serve_x_range`, `serve_y_range` and `bank_share`, as Block's.
+    - v0: the options are the class's keyword arguments; `opponent`, which Score took only
+      as `None`, is no longer one.
     """
 
-    task_class = ScoreTask
+    def __init__(
+        self,
+        *,
+        ball_start: Literal["resting", "incoming"] = "resting",
+        obstacles: bool = False,
+        speed_range: tuple[float, float] = (3.0, 7.0),
+        serve_x_range: tuple[float, float] = (0.0, 0.4),
+        serve_y_range: tuple[float, float] = (-0.3, 0.3),
+        bank_share: float = 0.0,
+        goal_reward: float = 1000.0,
+        out_of_table_penalty: float = 1000.0,
+        ball_to_goal_weight: float = 0.0,
+        figurine_to_ball_weight: float = 0.0,
+        # The authors' scoring tasks regularise the action.
+        action_regularisation_weight: float = 0.5,
+        shaping: Literal["difference", "potential"] = "difference",
+        gamma: float = 0.99,
+        joint_velocities: bool = True,
+        observe_figurines: bool = False,
+        opponent_prismatic_only: Literal[False] = False,
+        stagnation_steps: int = 0,
+        ball_friction_range: tuple[float, float] | None = None,
+        ball_restitution_range: tuple[float, float] | None = None,
+        ball_mass_range: tuple[float, float] | None = None,
+        drive_gain_range: tuple[float, float] | None = None,
+        rolling_resistance_range: tuple[float, float] | None = None,
+        estimated_state: bool = False,
+        camera_noise: dict[str, Any] | None = None,
+        residual: float = 0.0,
+        render_mode: str | None = None,
+        render_width: int = 320,
+        render_height: int = 180,
+        physics_hz: int = 240,
+        control_hz: int = 60,
+        contact_travel: float = 0.005,
+        rolling_resistance: float = 0.01,
+    ) -> None:
+        super().__init__(
+            ScoreTask(
+                ball_start=ball_start,
+                obstacles=obstacles,
+                speed_range=speed_range,
+                serve_x_range=serve_x_range,
+                serve_y_range=serve_y_range,
+                bank_share=bank_share,
+            ),
+            opponent=None,
+            goal_reward=goal_reward,
+            out_of_table_penalty=out_of_table_penalty,
+            ball_to_goal_weight=ball_to_goal_weight,
+            figurine_to_ball_weight=figurine_to_ball_weight,
+            action_regularisation_weight=action_regularisation_weight,
+            shaping=shaping,
+            gamma=gamma,
+            joint_velocities=joint_velocities,
+            observe_figurines=observe_figurines,
+            opponent_prismatic_only=opponent_prismatic_only,
+            stagnation_steps=stagnation_steps,
+            ball_friction_range=ball_friction_range,
+            ball_restitution_range=ball_restitution_range,
+            ball_mass_range=ball_mass_range,
+            drive_gain_range=drive_gain_range,
+            rolling_resistance_range=rolling_resistance_range,
+            estimated_state=estimated_state,
+            camera_noise=camera_noise,
+            residual=residual,
+            render_mode=render_mode,
+            render_width=render_width,
+            render_height=render_height,
+            physics_hz=physics_hz,
+            control_hz=control_hz,
+            contact_travel=contact_travel,
+            rolling_resistance=rolling_resistance,
+        )

@@ -8,7 +8,7 @@ import numpy as np
 
 from foosball_gym import table as T
 from foosball_gym.estimation.kalman import BallFilter, RodFilter
-from foosball_gym.interface.observations import ObservationBuilder
+from foosball_gym.policy_io.observations import ObservationBuilder
 
 
 class TableStateEstimator:

@@ -25,7 +25,7 @@ from typing import Any
 
 from foosball_gym import table as T
 
-Joint = tuple[str, str]  # (rod name, "slide" | "spin"), as in foosball_gym.interface.task
+Joint = tuple[str, str]  # (rod name, "slide" | "spin"), as in foosball_gym.policy_io.task
 
 JOINT_KINDS = ("slide", "spin")
 DRIVE_MODES = ("csp", "pp")

@@ -19,10 +19,9 @@ from pettingzoo import ParallelEnv
 from foosball_gym import table as T
 from foosball_gym.envs.base import RENDER_MODES, FoosballEnv
 from foosball_gym.envs.rewards import TERMS, RewardComputer
-from foosball_gym.interface.observations import check_flag, mirrored_builder
-from foosball_gym.interface.task import check_action
-from foosball_gym.registration import ENV_IDS
-from foosball_gym.tasks.registry import TASKS
+from foosball_gym.policy_io.observations import check_flag, mirrored_builder
+from foosball_gym.policy_io.task import check_action
+from foosball_gym.registration import ENV_IDS, TASKS
 
 AGENTS = ("home", "away")
 #: The registered ids whose task has an opponent: the ones :func:`parallel_env` plays.

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.interface.task import Layout, action_joints, check_action
+from foosball_gym.policy_io.task import Layout, action_joints, check_action
 
 Keys = Callable[[], tuple[frozenset[str], frozenset[str]]]
 
@@ -65,7 +65,7 @@ def key_map_text() -> str:
 
 def two_player_envs() -> list[str]:
     """The registered environments with an away side a person can play."""
-    from foosball_gym.tasks import TASKS, make_task
+    from foosball_gym.registration import TASKS, make_task
 
     return [env_id for env_id in TASKS if make_task(env_id)[0].layout.opponent]
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym.interface.task import Joint, TaskInterface
+from foosball_gym.policy_io.task import Joint, TaskInterface
 
 STAGES = ("frame", "detect", "estimate", "policy", "command", "read")
 

@@ -23,10 +23,10 @@ from foosball_gym import table as T
 from foosball_gym.estimation import BallFilter, TableStateEstimator
 from foosball_gym.hardware.config import TableConfig
 from foosball_gym.hardware.drives import TableDrives
-from foosball_gym.interface.task import TaskInterface
 from foosball_gym.play.human import KEY_HINT, HumanOpponent, human_rod
 from foosball_gym.play.loop import STAGES, LoopRecord, PlayLoop, StatusLine
 from foosball_gym.play.session import SessionLog
+from foosball_gym.policy_io.task import TaskInterface
 from foosball_gym.vision import (
     CameraCalibration,
     ColourBallDetector,
@@ -253,7 +253,7 @@ def play_sim(
         ValueError: ``human`` names no away rod of the task (or the task has no away side).
         WindowError: the GUI window could not be opened (no display); a RuntimeError.
     """
-    from foosball_gym.tasks import task_interface
+    from foosball_gym.registration import task_interface
     from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
 
     if camera_size is None:

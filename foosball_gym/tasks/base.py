@@ -2,12 +2,11 @@
 
 A :class:`Task` holds only the task's own options. The game (:mod:`foosball_gym.game`) plays
 it on a simulated table and the environment (:mod:`foosball_gym.envs`) puts a Gymnasium face
-on the game; the real table needs only the task's :class:`~foosball_gym.interface.Layout`.
+on the game; the real table needs only the task's :class:`~foosball_gym.policy_io.Layout`.
 """
 
 from __future__ import annotations
 
-import inspect
 import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -15,8 +14,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.interface.task import Layout
 from foosball_gym.policies.scripted import ScriptedTeam
+from foosball_gym.policy_io.task import Layout
 
 
 @dataclass
@@ -73,17 +72,16 @@ def clear_of_ball(rod: T.Rod, slide: float, ball: tuple[float, float]) -> float:
 class Task:
     """A foosball task: subclasses set :attr:`layout` in ``__init__`` from their options.
 
+    Its options are its constructor's keyword arguments; the environment that plays it takes
+    them too, with the same names and defaults.
+
     Class attributes:
         reset_options: keys ``reset(options=...)`` accepts.
-        options: the task's discrete options and the values each takes (first: the default).
-        env_defaults: the environment's options this task sets otherwise than the base does.
     """
 
     layout: Layout
     extras: tuple[str, ...] = ()
     reset_options: ClassVar[tuple[str, ...]] = ("ball_position", "ball_velocity")
-    options: ClassVar[dict[str, tuple[Any, ...]]] = {}
-    env_defaults: ClassVar[dict[str, Any]] = {}
     #: True where a goal (or a dead ball) re-serves instead of ending the episode.
     continues_after_goal: bool = False
 
@@ -108,20 +106,3 @@ class Task:
         camera (``estimated_state``, a real or simulated table), so skills that need the ball's
         path to a millimetre may be used."""
         return ScriptedTeam(names, self.layout.controlled, self.layout.joints)
-
-    @classmethod
-    def option_names(cls) -> tuple[str, ...]:
-        """The keyword arguments of this task's constructor."""
-        params = inspect.signature(cls.__init__).parameters
-        return tuple(name for name in params if name != "self")
-
-
-def split_options(
-    task_class: type[Task], kwargs: dict[str, Any]
-) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Split an environment's keyword arguments into the task's own and the environment's,
-    the task's environment defaults filled in."""
-    own = set(task_class.option_names())
-    task_kwargs = {k: v for k, v in kwargs.items() if k in own}
-    env_kwargs = {**task_class.env_defaults, **{k: v for k, v in kwargs.items() if k not in own}}
-    return task_kwargs, env_kwargs

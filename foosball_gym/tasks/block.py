@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.interface.task import Layout
+from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start, Task
 from foosball_gym.tasks.serves import Shots
 

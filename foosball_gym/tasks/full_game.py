@@ -7,17 +7,14 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.interface.observations import check_flag
-from foosball_gym.interface.task import Layout
+from foosball_gym.policy_io.observations import check_flag
+from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start, Task
 
 
 class FullGameTask(Task):
     """All eight rods; a kick-off from a side wall. Success is scoring (in a continuous match:
     being ahead)."""
-
-    options = {"opponent_prismatic_only": (False, True), "continuous": (False, True)}
-    env_defaults = {"stagnation_steps": 60}
 
     def __init__(self, *, continuous: bool = False) -> None:
         self.continuous = check_flag("continuous", continuous)

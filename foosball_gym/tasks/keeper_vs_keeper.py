@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.interface.observations import check_flag
-from foosball_gym.interface.task import Layout
+from foosball_gym.policy_io.observations import check_flag
+from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start, Task
 from foosball_gym.tasks.serves import resting_in_front_of
 
@@ -16,11 +16,6 @@ from foosball_gym.tasks.serves import resting_in_front_of
 class KeeperVsKeeperTask(Task):
     """The two keepers; the ball starts at rest in front of one. Success is scoring (in a
     continuous match: being ahead)."""
-
-    options = {"opponent_prismatic_only": (True, False), "continuous": (False, True)}
-    # The real table's camera sees only where the opponent's rod is slid to; a ball lying
-    # still for a second is a draw.
-    env_defaults = {"opponent_prismatic_only": True, "stagnation_steps": 60}
 
     def __init__(self, *, continuous: bool = False) -> None:
         # A match of many serves: two sound keepers rarely score, so one serve a game leaves

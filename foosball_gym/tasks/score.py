@@ -3,14 +3,14 @@ or without still obstacles in the way."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.interface.observations import check_flag
-from foosball_gym.interface.task import Layout
 from foosball_gym.policies.scripted import ScriptedTeam
+from foosball_gym.policy_io.observations import check_flag
+from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start, Task
 from foosball_gym.tasks.serves import Shots, check_choice, resting_in_front_of
 
@@ -22,14 +22,11 @@ class ScoreTask(Task):
     """A goal with the home keeper; success is scoring one."""
 
     reset_options = ("ball_position", "ball_velocity", "obstacle_positions")
-    options = {"ball_start": BALL_STARTS, "obstacles": (False, True)}
-    # The authors' scoring tasks regularise the action.
-    env_defaults = {"action_regularisation_weight": 0.5}
 
     def __init__(
         self,
         *,
-        ball_start: str = "resting",
+        ball_start: Literal["resting", "incoming"] = "resting",
         obstacles: bool = False,
         speed_range: tuple[float, float] = (3.0, 7.0),
         serve_x_range: tuple[float, float] = (0.0, 0.4),

@@ -16,8 +16,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from foosball_gym.catalog import check_env_id
-from foosball_gym.registration import __version__
+from foosball_gym.registration import __version__, check_env_id
 from foosball_gym.table import PHYSICS_REVISION
 from foosball_gym.training.files import atomic_write_text
 from foosball_gym.training.selfplay_rule import check_rule, default_threshold

@@ -20,7 +20,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.catalog import check_env_id
+from foosball_gym.registration import check_env_id
 from foosball_gym.training.config import TrainConfig
 
 SHIPPED = "builtin:"

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym.interface.task import residual_action
+from foosball_gym.policy_io.task import residual_action
 from foosball_gym.training.config import PhysicsMismatchWarning, physics_mismatch
 from foosball_gym.training.files import CONFIG_FILE, LEGACY_NORM_FILE, MODEL_FILE, NORM_FILE
 from foosball_gym.training.snapshot import PolicySnapshot, policy_from_state_dict
@@ -188,7 +188,7 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     residual = float(env_kwargs.pop("residual", 0.0) or 0.0)
     baseline = None
     if residual and env_id is not None:
-        from foosball_gym.catalog import scripted_policy
+        from foosball_gym.registration import scripted_policy
 
         baseline = scripted_policy(env_id, env_kwargs)
     return LoadedPolicy(

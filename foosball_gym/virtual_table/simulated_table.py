@@ -41,10 +41,10 @@ from foosball_gym import table as T
 from foosball_gym.camera import CameraModel, CameraNoise
 from foosball_gym.game import Game
 from foosball_gym.hardware.config import BusConfig, JointConfig, TableConfig
-from foosball_gym.interface.task import TaskInterface
 from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
+from foosball_gym.policy_io.task import TaskInterface
+from foosball_gym.registration import interface_of, make_task
 from foosball_gym.sim import TableSim, drive_acceleration
-from foosball_gym.tasks import interface_of, make_task
 from foosball_gym.virtual_table.camera_process import CameraProcess, FrameBuffer
 from foosball_gym.virtual_table.drives import SimulatedDrives
 from foosball_gym.virtual_table.viewer_process import ViewerProcess

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table as T
-from foosball_gym.interface.observations import ObservationBuilder, ObservationOptions
+from foosball_gym.policy_io.observations import ObservationBuilder, ObservationOptions
 
 Joint = tuple[str, str]  # (rod name, "slide" | "spin")
 

@@ -4,7 +4,7 @@ The Gymnasium environments, the simulated table, the state estimator and the rea
 loop all build observations and read actions through this package, so it imports none of them.
 """
 
-from foosball_gym.interface.observations import ObservationBuilder, ObservationOptions
-from foosball_gym.interface.task import Joint, Layout, TaskInterface
+from foosball_gym.policy_io.observations import ObservationBuilder, ObservationOptions
+from foosball_gym.policy_io.task import Joint, Layout, TaskInterface
 
 __all__ = ["Joint", "Layout", "ObservationBuilder", "ObservationOptions", "TaskInterface"]

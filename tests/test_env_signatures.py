@@ -1,0 +1,178 @@
+"""An environment's options are its class's keyword arguments, described once in its docstring,
+and the one table of ids is what Gymnasium and the real table read."""
+
+from __future__ import annotations
+
+import inspect
+import re
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from foosball_gym import ENV_IDS
+from foosball_gym import table as T
+from foosball_gym.envs.base import FoosballEnv
+from foosball_gym.envs.options import docstring_arguments
+from foosball_gym.registration import ENVS, env_class, make_task, task_interface
+
+# The options whose default is the task's own, not the one every environment shares.
+TASK_DEFAULTS = {"action_regularisation_weight", "opponent_prismatic_only", "stagnation_steps"}
+SECTIONS = [
+    "Description",
+    "Action Space",
+    "Observation Space",
+    "Rewards",
+    "Starting State",
+    "Episode End",
+    "Arguments",
+    "Version History",
+]
+
+
+def first_steps(env: gym.Env, seed: int = 5, steps: int = 30) -> list[np.ndarray]:
+    rng = np.random.default_rng(seed)
+    obs = [env.reset(seed=seed)[0]]
+    for _ in range(steps):
+        action = rng.uniform(-1, 1, env.action_space.shape).astype(np.float32)
+        obs.append(env.step(action)[0])
+    return obs
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_the_signature_lists_every_option_with_its_default(env_id):
+    cls = env_class(env_id)
+    params = inspect.signature(cls).parameters
+    assert params, cls
+    for name, p in params.items():
+        assert p.kind is inspect.Parameter.KEYWORD_ONLY, name  # no **kwargs hides an option
+        assert p.default is not inspect.Parameter.empty, name
+        assert p.annotation is not inspect.Parameter.empty, name
+    # Every option given its default makes the environment the id makes with none.
+    every = gym.make(env_id, **{name: p.default for name, p in params.items()})
+    plain = gym.make(env_id)
+    try:
+        assert every.observation_space == plain.observation_space
+        for a, b in zip(first_steps(every), first_steps(plain)):
+            np.testing.assert_array_equal(a, b)
+    finally:
+        every.close()
+        plain.close()
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_an_unknown_option_names_every_option_there_is(env_id):
+    names = inspect.signature(env_class(env_id)).parameters
+    for make in (lambda: gym.make(env_id, warp=3), lambda: task_interface(env_id, {"warp": 3})):
+        with pytest.raises(TypeError, match="has no option 'warp'; allowed: ") as err:
+            make()
+        allowed = str(err.value).split("allowed: ")[1]
+        assert all(re.search(rf"\b{name}\b", allowed) for name in names)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_each_option_is_described_once_in_the_docstrings(env_id):
+    cls = env_class(env_id)
+    options = set(inspect.signature(cls).parameters)
+    described = [
+        name
+        for klass in cls.__mro__
+        if issubclass(klass, FoosballEnv)
+        for names, _ in _entries(klass)
+        for name in names
+    ]
+    assert sorted(described) == sorted(set(described)), "an option described twice"
+    own = {name for names, _ in _entries(cls) for name in names}
+    assert own <= options, own - options
+    assert options <= set(described), options - set(described)
+    assert set(cls.argument_docs()) >= options
+
+
+def _entries(klass: type) -> list[tuple[list[str], str]]:
+    return docstring_arguments(klass.__dict__.get("__doc__") or "")
+
+
+def test_the_shared_docstring_describes_only_options_some_environment_takes():
+    everyone = {
+        name for entry in ENVS for name in inspect.signature(env_class(entry.id)).parameters
+    }
+    shared = {name for names, _ in _entries(FoosballEnv) for name in names}
+    assert shared <= everyone, shared - everyone
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_the_docstring_has_gymnasiums_sections(env_id):
+    doc = inspect.getdoc(env_class(env_id))
+    assert re.findall(r"^## (.+)$", doc, flags=re.MULTILINE) == SECTIONS
+
+
+def test_options_every_environment_shares_default_alike():
+    signatures = [inspect.signature(env_class(entry.id)).parameters for entry in ENVS]
+    shared = set.intersection(*(set(s) for s in signatures)) - TASK_DEFAULTS
+    assert {"goal_reward", "shaping", "residual", "physics_hz"} <= shared
+    for name in shared:
+        assert len({repr(s[name].default) for s in signatures}) == 1, name
+    # The simulator's own defaults: the table's numbers.
+    physics = {name: signatures[0][name].default for name in ("physics_hz", "control_hz")}
+    physics |= {n: signatures[0][n].default for n in ("contact_travel", "rolling_resistance")}
+    assert physics == {
+        "physics_hz": T.PHYSICS_HZ,
+        "control_hz": T.CONTROL_HZ,
+        "contact_travel": T.CONTACT_TRAVEL,
+        "rolling_resistance": T.ROLLING_RESISTANCE,
+    }
+
+
+def test_the_physics_options_are_checked_once(monkeypatch):
+    import sys
+
+    from foosball_gym import physics_options
+
+    calls = []
+    checked = physics_options.check_physics
+
+    def counted(*args, **kwargs):
+        calls.append(args)
+        return checked(*args, **kwargs)
+
+    gym.make("Foosball-Block-v0").close()  # every module that may check them is imported
+    for module in list(sys.modules.values()):
+        if getattr(module, "check_physics", None) is checked:
+            monkeypatch.setattr(module, "check_physics", counted)
+    gym.make("Foosball-Block-v0", physics_hz=480, control_hz=120).close()
+    assert len(calls) == 1
+    with pytest.raises(ValueError, match="whole multiple of control_hz"):
+        gym.make("Foosball-Block-v0", physics_hz=250)
+
+
+@pytest.mark.parametrize(
+    "env_id, kwargs",
+    [
+        ("Foosball-Block-v0", {}),
+        ("Foosball-Block-v0", {"speed_range": (2, 10), "bank_share": 0.5}),
+        ("Foosball-Score-v0", {"ball_start": "incoming", "obstacles": True}),
+        ("Foosball-KeeperVsKeeper-v0", {"continuous": True, "stagnation_steps": 0}),
+        ("Foosball-FullGame-v0", {"opponent_prismatic_only": True}),
+    ],
+)
+def test_the_real_table_builds_the_task_the_environment_plays(env_id, kwargs):
+    task, options = make_task(env_id, kwargs)
+    env = gym.make(env_id, **kwargs)
+    try:
+        assert type(task) is type(env.unwrapped.task)
+        assert vars(task) == vars(env.unwrapped.task)
+        assert options["stagnation_steps"] == env.unwrapped.game.stagnation_steps
+    finally:
+        env.close()
+
+
+def test_gymnasium_registers_the_table():
+    assert ENV_IDS == tuple(entry.id for entry in ENVS)
+    for entry in ENVS:
+        spec = gym.spec(entry.id)
+        assert (spec.entry_point, spec.max_episode_steps) == (entry.env, entry.max_episode_steps)
+        cls = env_class(entry.id)
+        assert issubclass(cls, FoosballEnv)
+        # The class is where the docs site finds it: foosball_gym.envs.<module>.<Class>.
+        assert entry.env == f"{cls.__module__}:{cls.__name__}"
+        assert cls.__module__.startswith("foosball_gym.envs.")
