@@ -29,7 +29,7 @@ def measure(env_id: str, steps: int, n_envs: int, vec_env: str) -> float:
     from stable_baselines3.common.callbacks import BaseCallback
 
     from foosball_gym.training.config import TrainConfig
-    from foosball_gym.training.run import train
+    from foosball_gym.training.sb3.trainer import train
 
     class Clock(BaseCallback):
         def _on_training_start(self) -> None:
