@@ -16,7 +16,8 @@ import ray
 from ray.tune.registry import register_env
 
 from foosball_gym.training.config import TrainConfig
-from foosball_gym.training.rllib_backend import _ENV_NAME, _build_config, make_game, opponent_id
+from foosball_gym.training.rllib.env_runner import ENV_NAME, make_game, opponent_id
+from foosball_gym.training.rllib.ray_config import build_config
 
 ENV = "Foosball-KeeperVsKeeper-v0"
 
@@ -28,8 +29,8 @@ def steps_per_second(workers: int, steps: int, envs_per_runner: int, repeats: in
     config.check()
     ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
     try:
-        register_env(_ENV_NAME, make_game)
-        algo = _build_config(config, workers, (opponent_id(0),), 1e-3, steps).build_algo()
+        register_env(ENV_NAME, make_game)
+        algo = build_config(config, workers, (opponent_id(0),), 1e-3, steps).build_algo()
         group = algo.env_runner_group
         per_runner = steps // workers
 
@@ -51,7 +52,8 @@ def steps_per_second(workers: int, steps: int, envs_per_runner: int, repeats: in
 def sb3_steps_per_second(steps: int, n_envs: int) -> float:
     """The SB3 backend's sampling: its self-play VecEnv stepped with the learner's policy (the
     opponents' batched inference included), in this process."""
-    from foosball_gym.training.run import build_model, make_env
+    from foosball_gym.training.sb3.model import build_model
+    from foosball_gym.training.sb3.vec_env import make_env
 
     config = TrainConfig(ENV, n_envs=n_envs, net_arch=(256, 128, 64), self_play=True)
     config.check()

@@ -14,9 +14,11 @@ import numpy as np
 import torch as th
 
 from foosball_gym.training.config import TrainConfig
-from foosball_gym.training.run import build_model, make_env
-from foosball_gym.training.selfplay import SelfPlayCallback, find_selfplay_env
-from foosball_gym.training.snapshot import PolicySnapshot
+from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
+from foosball_gym.training.sb3.model import build_model
+from foosball_gym.training.sb3.vec_env import make_env
+from foosball_gym.training.selfplay.callback import SelfPlayCallback
+from foosball_gym.training.selfplay.opponents import find_selfplay_env
 
 ENV = "Foosball-KeeperVsKeeper-v0"
 

@@ -28,7 +28,8 @@ from pathlib import Path
 
 from foosball_gym.training.config import TrainConfig
 from foosball_gym.training.config_file import load_train_config
-from foosball_gym.training.run import plot_curve, train
+from foosball_gym.training.run_dir.curve import plot_curve
+from foosball_gym.training.sb3.trainer import train
 
 TASKS = {
     "block": ("Foosball-Block-v0", 0.98, {}),

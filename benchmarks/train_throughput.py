@@ -29,7 +29,11 @@ def measure(env_id: str, steps: int, n_envs: int, vec_env: str) -> float:
     from stable_baselines3.common.callbacks import BaseCallback
 
     from foosball_gym.training.config import TrainConfig
-    from foosball_gym.training.run import train
+
+    try:
+        from foosball_gym.training.sb3.trainer import train
+    except ImportError:  # a checkout from before training/ was split by job
+        from foosball_gym.training.run import train
 
     class Clock(BaseCallback):
         def _on_training_start(self) -> None:

@@ -206,12 +206,12 @@ def scripted(env_id: str, env_kwargs: dict[str, Any], on_table: bool = False) ->
 
 
 def load_model(spec: str, trust: bool = False) -> Any:
-    """A trained policy (:class:`~foosball_gym.training.models.LoadedPolicy`) from a run
+    """A trained policy (:class:`~foosball_gym.training.loading.LoadedPolicy`) from a run
     directory, a model zip or ``builtin:NAME``; pickled files only with ``trust``."""
     from foosball_gym.training import require_train_extra
 
     require_train_extra()
-    from foosball_gym.training.models import ModelLoadError, load_policy
+    from foosball_gym.training.loading import ModelLoadError, load_policy
 
     try:
         return load_policy(spec, trust=trust)

@@ -9,8 +9,8 @@ from pathlib import Path
 
 from foosball_gym.cli.common import CliError, check_directory
 from foosball_gym.training.config import TrainConfig
-from foosball_gym.training.files import CONFIG_FILE, has_checkpoint
-from foosball_gym.training.rllib_backend import BACKEND, INSTALL, require_ray, train_rllib
+from foosball_gym.training.rllib.ray_start import INSTALL, require_ray
+from foosball_gym.training.run_dir.files import CONFIG_FILE, RLLIB_BACKEND, has_checkpoint
 
 
 def _worker_count(text: str) -> int:
@@ -28,7 +28,7 @@ def add_rllib_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("distributed training (--backend rllib)")
     group.add_argument(
         "--backend",
-        choices=("sb3", BACKEND),
+        choices=("sb3", RLLIB_BACKEND),
         default=None,
         help="sb3: Stable-Baselines3 in this process (default); rllib: self-play PPO on "
         f"Ray RLlib, sampling on --num-workers env runners (needs {INSTALL})",
@@ -59,6 +59,8 @@ def run_from_args(args: argparse.Namespace, config: TrainConfig | None = None) -
         require_ray()
     except ImportError as err:
         raise CliError(str(err)) from None
+    from foosball_gym.training.rllib.trainer import train_rllib
+
     num_workers = 2 if args.num_workers is None else args.num_workers
     resume = bool(getattr(args, "resume", None))
     if resume:

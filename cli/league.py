@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     from foosball_gym.training import require_train_extra
 
     require_train_extra()
-    from foosball_gym.training.league import (
+    from foosball_gym.training.selfplay.league import (
         SCRIPTED,
         Player,
         rising,

@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     from foosball_gym.training import require_train_extra
 
     require_train_extra()
-    from foosball_gym.training.migrate import migrate_run
+    from foosball_gym.training.run_dir.migrate import migrate_run
 
     try:
         written = migrate_run(args.run, trust=args.trust_model)

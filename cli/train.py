@@ -30,9 +30,13 @@ from foosball_gym.training.config_file import (
     load_train_config,
     shipped_configs,
 )
-from foosball_gym.training.files import CONFIG_FILE, has_checkpoint
-from foosball_gym.training.rllib_backend import BACKEND, read_backend
-from foosball_gym.training.selfplay_rule import SELFPLAY_RULES
+from foosball_gym.training.run_dir.files import (
+    CONFIG_FILE,
+    RLLIB_BACKEND,
+    has_checkpoint,
+    read_backend,
+)
+from foosball_gym.training.selfplay.rule import SELFPLAY_RULES
 
 # The TrainConfig fields offered as options (n_envs as --n-envs), with how the command line
 # spells their values.
@@ -204,7 +208,9 @@ def run(args: argparse.Namespace) -> int:
             f"{', '.join(given)} with --resume {args.resume}: a run continues with the settings "
             f"in its {CONFIG_FILE}; leave {'it' if len(given) == 1 else 'them'} out"
         )
-    if args.backend == BACKEND or (args.resume and read_backend(args.resume) == BACKEND):
+    if args.backend == RLLIB_BACKEND or (
+        args.resume and read_backend(args.resume) == RLLIB_BACKEND
+    ):
         if args.resume and args.timesteps is not None:
             raise CliError(
                 f"--timesteps with --resume {args.resume}: an rllib run continues to the "
@@ -216,7 +222,7 @@ def run(args: argparse.Namespace) -> int:
     from foosball_gym.training import require_train_extra
 
     require_train_extra()
-    from foosball_gym.training.run import train
+    from foosball_gym.training.sb3.trainer import train
 
     if args.resume:
         out = Path(args.resume)

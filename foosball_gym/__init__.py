@@ -16,9 +16,9 @@ def load_policy(spec: Any, trust: bool = False) -> Any:
     """A trained policy, ready to act: ``policy(obs) -> action`` with its normalisation.
 
     ``spec`` is a run directory, a model ``.zip`` or ``builtin:NAME``; see
-    :func:`foosball_gym.training.models.load_policy` (the ``train`` extra), which this calls.
+    :func:`foosball_gym.training.loading.load_policy` (the ``train`` extra), which this calls.
     """
-    from foosball_gym.training.models import load_policy as load
+    from foosball_gym.training.loading import load_policy as load
 
     return load(spec, trust=trust)
 

@@ -16,13 +16,13 @@ from foosball_gym import table as T
 pytest.importorskip("stable_baselines3")
 
 from foosball_gym.evaluation import evaluate  # noqa: E402
-from foosball_gym.training.config import recorded_physics_revision  # noqa: E402
-from foosball_gym.training.models import (  # noqa: E402
+from foosball_gym.training.loading import (  # noqa: E402
     PhysicsMismatchWarning,
     builtin_names,
     builtin_path,
     load_policy,
 )
+from foosball_gym.training.run_dir.physics import recorded_physics_revision  # noqa: E402
 
 EPISODES = 100
 # Measured over 500 seeded episodes each shipped policy does at least as well as its baseline

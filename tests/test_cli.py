@@ -310,7 +310,7 @@ def test_eval_refuses_a_json_path_it_cannot_write_before_evaluating(
 def test_a_run_naming_an_unknown_environment_exits_with_status_2(tmp_path, where, capsys):
     import shutil
 
-    from foosball_gym.training.models import builtin_path
+    from foosball_gym.training.loading import builtin_path
 
     run = tmp_path / "run"
     shutil.copytree(builtin_path("block"), run)

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from foosball_gym.training.league import (
+from foosball_gym.training.selfplay.league import (
     League,
     Player,
     pick_generations,

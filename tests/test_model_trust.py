@@ -18,9 +18,9 @@ import torch as th  # noqa: E402
 
 from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
-from foosball_gym.training.models import ModelLoadError, load_policy  # noqa: E402
-from foosball_gym.training.run import train  # noqa: E402
-from foosball_gym.training.snapshot import PolicySnapshot  # noqa: E402
+from foosball_gym.training.loading import ModelLoadError, load_policy  # noqa: E402
+from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot  # noqa: E402
+from foosball_gym.training.sb3.trainer import train  # noqa: E402
 
 CHECKPOINT = "checkpoints/model_0000000128"
 
@@ -188,7 +188,7 @@ def legacy_copy(run: Path, dst: Path) -> Path:
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from foosball_gym.training.storage import NormStats
+    from foosball_gym.training.run_dir.storage import NormStats
 
     shutil.copytree(run, dst)
     venv = VecNormalize(make_vec_env("Foosball-Block-v0", n_envs=1))

@@ -18,9 +18,10 @@ pytest.importorskip("stable_baselines3")
 import foosball_gym  # noqa: E402
 from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.table import PHYSICS_REVISION  # noqa: E402
-from foosball_gym.training.config import TrainConfig, physics_record  # noqa: E402
-from foosball_gym.training.models import PhysicsMismatchWarning, load_policy  # noqa: E402
-from foosball_gym.training.run import train  # noqa: E402
+from foosball_gym.training.config import TrainConfig  # noqa: E402
+from foosball_gym.training.loading import PhysicsMismatchWarning, load_policy  # noqa: E402
+from foosball_gym.training.run_dir.physics import physics_record  # noqa: E402
+from foosball_gym.training.sb3.trainer import train  # noqa: E402
 
 CHECKPOINT = "checkpoints/model_0000000128.zip"
 

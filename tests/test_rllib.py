@@ -23,15 +23,12 @@ from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.cli.distributed import add_rllib_arguments  # noqa: E402
 from foosball_gym.evaluation import evaluate  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
-from foosball_gym.training.rllib_backend import (  # noqa: E402
-    POLICY_FILE,
-    POLICY_INFO_FILE,
-    _SelfPlay,
-    check_rllib_config,
-    export_policy,
-    load_rllib_policy,
-    train_rllib,
-)
+from foosball_gym.training.loading.rllib_policy import load_rllib_policy  # noqa: E402
+from foosball_gym.training.rllib.export import export_policy  # noqa: E402
+from foosball_gym.training.rllib.opponent_pool import OpponentPool  # noqa: E402
+from foosball_gym.training.rllib.ray_config import check_rllib_config  # noqa: E402
+from foosball_gym.training.rllib.trainer import train_rllib  # noqa: E402
+from foosball_gym.training.run_dir.files import POLICY_FILE, POLICY_INFO_FILE  # noqa: E402
 
 ENV = "Foosball-KeeperVsKeeper-v0"
 
@@ -115,7 +112,7 @@ def test_policy_file_that_disagrees_with_its_description_is_refused(tmp_path):
 def test_opponent_is_replaced_by_the_rule_both_backends_share(tmp_path):
     def pool(rule):
         config = TrainConfig(ENV, selfplay_window=4, selfplay_rule=rule, selfplay_threshold=0.2)
-        return _SelfPlay(config, tmp_path)
+        return OpponentPool(config, tmp_path)
 
     sp = pool("net_score")
     assert sp.judge([1, 1, 1]) is None  # not a full window yet

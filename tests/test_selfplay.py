@@ -17,7 +17,8 @@ from foosball_gym.training import (  # noqa: E402
     SelfPlayCallback,
     SelfPlayVecEnv,
 )
-from foosball_gym.training.selfplay import AGAINST_ANCHOR, game_result  # noqa: E402
+from foosball_gym.training.selfplay.opponents import AGAINST_ANCHOR  # noqa: E402
+from foosball_gym.training.selfplay.rule import game_result  # noqa: E402
 
 ENV = "Foosball-KeeperVsKeeper-v0"
 

@@ -16,7 +16,7 @@ from test_selfplay import ENV, selfplay_model  # noqa: E402
 from foosball_gym import load_policy  # noqa: E402
 from foosball_gym.training import PolicySnapshot, SelfPlayCallback  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
-from foosball_gym.training.selfplay_gate import (  # noqa: E402
+from foosball_gym.training.selfplay.gate import (  # noqa: E402
     GateVerdict,
     ReplacementGate,
     _on_mean,
@@ -117,7 +117,7 @@ class ScriptedVerdicts:
 
 
 # No config.json beside this bare callback's files: the model records no physics.
-@pytest.mark.filterwarnings("ignore::foosball_gym.training.config.PhysicsMismatchWarning")
+@pytest.mark.filterwarnings("ignore::foosball_gym.training.run_dir.physics.PhysicsMismatchWarning")
 def test_a_refused_replacement_keeps_the_opponent_and_a_passed_one_is_saved_as_a_model(
     tmp_path,
 ):

@@ -8,10 +8,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from foosball_gym.training.selfplay_rule import (
+from foosball_gym.training.selfplay.history import restored_elo
+from foosball_gym.training.selfplay.rule import (
     ReplacementRule,
     performance_elo,
-    restored_elo,
     sign_test,
 )
 

@@ -254,6 +254,31 @@ BELOW = {
         "foosball_gym.sim",
         "foosball_gym.training",
     },
+    # Inside training: the run directory is the record both backends write alike, so it knows
+    # neither of them; loading a policy to play needs no trainer; self-play serves both
+    # backends; and each backend stands apart from the other.
+    "foosball_gym.training.run_dir": {
+        "foosball_gym.training.config",
+        "foosball_gym.training.config_file",
+        "foosball_gym.training.selfplay",
+        "foosball_gym.training.sb3",
+        "foosball_gym.training.rllib",
+    },
+    "foosball_gym.training.loading": {
+        "foosball_gym.training.config",
+        "foosball_gym.training.config_file",
+        "foosball_gym.training.selfplay",
+        "foosball_gym.training.sb3",
+        "foosball_gym.training.rllib",
+    },
+    "foosball_gym.training.selfplay": {
+        "foosball_gym.training.config",
+        "foosball_gym.training.config_file",
+        "foosball_gym.training.sb3",
+        "foosball_gym.training.rllib",
+    },
+    "foosball_gym.training.sb3": {"foosball_gym.training.rllib"},
+    "foosball_gym.training.rllib": {"foosball_gym.training.sb3"},
 }
 
 
@@ -270,6 +295,63 @@ def test_no_module_imports_a_layer_above_its_own():
         if any(target == a or target.startswith(a + ".") for a in above)
     ]
     assert wrong == []
+
+
+def test_the_training_layers_are_seen_by_the_layer_check():
+    graph = import_graph(module_files(SOURCES))
+    # What the rules above hold apart is there to hold apart: both backends write the run
+    # directory's curve, and both load policies from the package that plays them.
+    for trainer in ("foosball_gym.training.sb3.callbacks", "foosball_gym.training.rllib.trainer"):
+        assert "foosball_gym.training.run_dir.curve" in graph[trainer]
+    assert (
+        "foosball_gym.training.loading.rllib_policy" in graph["foosball_gym.training.rllib.trainer"]
+    )
+
+
+def test_no_training_module_is_over_500_lines():
+    long = {
+        str(p.relative_to(PACKAGE)): n
+        for p in (PACKAGE / "training").rglob("*.py")
+        if (n := len(p.read_text().splitlines())) > 500
+    }
+    assert long == {}
+
+
+def test_loading_a_policy_imports_no_trainer(tmp_path):
+    """Playing a trained policy needs neither backend's trainer nor Ray: a shipped policy, an
+    SB3 model zip and an exported RLlib policy all load without them."""
+    pytest.importorskip("stable_baselines3")
+    pytest.importorskip("torch")
+    import numpy as np
+
+    from foosball_gym.training.loading import builtin_names, builtin_path
+    from foosball_gym.training.rllib.export import export_policy
+
+    rng = np.random.default_rng(0)
+    state = {  # an RLlib PPO module's actor, as RLlib names its layers
+        "encoder.actor_encoder.net.mlp.0.weight": rng.normal(size=(8, 10)),
+        "encoder.actor_encoder.net.mlp.0.bias": rng.normal(size=8),
+        "pi.net.mlp.0.weight": rng.normal(size=(4, 8)),
+        "pi.net.mlp.0.bias": rng.normal(size=4),
+    }
+    export_policy(state, tmp_path / "rllib", env_id="Foosball-KeeperVsKeeper-v0", env_kwargs={})
+    name = builtin_names()[0]
+    specs = [f"builtin:{name}", str(builtin_path(name) / "model.zip"), str(tmp_path / "rllib")]
+    code = (
+        "import sys, warnings; from foosball_gym import load_policy;"
+        "warnings.simplefilter('ignore');"
+        "sizes = [load_policy(spec).observation_size for spec in sys.argv[1:]];"
+        # The RLlib backend, a package now, was the module rllib_backend: the prefix takes both.
+        "trainers = [m for m in sys.modules if m == 'ray' or m.startswith(('ray.',"
+        " 'foosball_gym.training.rllib', 'foosball_gym.training.sb3'))];"
+        "assert not trainers, trainers;"
+        "print(sizes)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code, *specs], capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().endswith(", 10]")
 
 
 def test_the_cycle_check_finds_a_cycle_closed_inside_a_function(tmp_path):

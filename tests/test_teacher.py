@@ -9,8 +9,8 @@ import pytest
 
 from foosball_gym.cli import main
 from foosball_gym.training.config import TrainConfig
-from foosball_gym.training.models import load_policy
-from foosball_gym.training.teacher import TeacherCallback
+from foosball_gym.training.loading import load_policy
+from foosball_gym.training.sb3.teacher import TeacherCallback
 
 ENV = "Foosball-Block-v0"
 SMALL = ["--n-envs", "2", "--n-steps", "256", "--batch-size", "128", "--no-progress"]

@@ -22,9 +22,9 @@ import foosball_gym  # noqa: E402
 from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.evaluation import evaluate, wilson_interval  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
-from foosball_gym.training.curve import read_curve  # noqa: E402
-from foosball_gym.training.models import ModelLoadError, load_policy  # noqa: E402
-from foosball_gym.training.run import train  # noqa: E402
+from foosball_gym.training.loading import ModelLoadError, load_policy  # noqa: E402
+from foosball_gym.training.run_dir.curve import read_curve  # noqa: E402
+from foosball_gym.training.sb3.trainer import train  # noqa: E402
 
 SMALL = [
     "--n-envs",
@@ -232,7 +232,7 @@ def test_a_corrupt_model_file_gives_a_clear_error(tmp_path, capsys):
 
 
 def test_pretraining_clones_the_scripted_keeper(tmp_path):
-    from foosball_gym.training.pretrain import collect
+    from foosball_gym.training.sb3.pretrain import collect
 
     demos = collect("Foosball-Block-v0", {}, episodes=5, gamma=0.99)
     assert demos.observations.shape[1] == 6 and len(demos.actions) == len(demos.returns)

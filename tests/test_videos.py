@@ -167,7 +167,7 @@ def test_train_writes_a_clip_of_the_policy_every_video_every_steps(runs):
 
 @needs_train
 def test_recording_clips_does_not_change_what_a_seeded_run_learns(runs):
-    from foosball_gym.training.storage import read_model_zip
+    from foosball_gym.training.run_dir.storage import read_model_zip
 
     plain, filmed = (read_model_zip(run / "model.zip")[1]["policy"] for run in runs)
     assert plain.keys() == filmed.keys()
@@ -183,7 +183,7 @@ def test_recording_clips_does_not_change_what_a_seeded_run_learns(runs):
 
 @needs_train
 def test_a_self_play_run_writes_clips_of_one_match(tmp_path, capsys):
-    from foosball_gym.training.run import clip_episodes
+    from foosball_gym.training.sb3.videos import clip_episodes
 
     env_id = "Foosball-KeeperVsKeeper-v0"
     argv = ["train", env_id, "--timesteps", "256", "--n-envs", "1", "--n-steps", "128"]

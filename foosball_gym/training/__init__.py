@@ -1,9 +1,18 @@
-"""Training and loading policies with Stable-Baselines3: self-play, runs, shipped policies.
+"""Training and loading policies: self-play, runs of either backend, shipped policies.
+
+The package is split by job:
+
+- :mod:`.config` and :mod:`.config_file`: a run's configuration, the same for both backends;
+- :mod:`.run_dir`: a run directory's files, curve, best model and storage, shared by both;
+- :mod:`.loading`: loading a policy to play (``load_policy``), without any trainer;
+- :mod:`.selfplay`: the replacement rule, its gate, the opponents, matches and the league;
+- :mod:`.sb3`: the Stable-Baselines3 backend (``train``);
+- :mod:`.rllib`: the Ray RLlib backend (``train_rllib``).
 
 Most of it needs the ``train`` extra: ``pip install "foosball_gym[train]"``. A run's
-configuration (:mod:`.config`) and file names (:mod:`.files`) do not, so the CLI builds its
-options and reads a run directory on the base install; the names below import on first use,
-raising :func:`require_train_extra`'s message where the extra is missing.
+configuration and its directory's file names do not, so the CLI builds its options and reads
+a run directory on the base install; the names below import on first use, raising
+:func:`require_train_extra`'s message where the extra is missing.
 """
 
 from __future__ import annotations
@@ -12,20 +21,19 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from foosball_gym.training.models import load_policy
-    from foosball_gym.training.selfplay import (
-        OpponentActionWrapper,
-        SelfPlayCallback,
-        SelfPlayVecEnv,
-    )
-    from foosball_gym.training.snapshot import PolicySnapshot
+    from foosball_gym.training.loading import load_policy
+    from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
+    from foosball_gym.training.sb3.trainer import train
+    from foosball_gym.training.selfplay.callback import SelfPlayCallback
+    from foosball_gym.training.selfplay.opponents import OpponentActionWrapper, SelfPlayVecEnv
 
 _LAZY = {
-    "load_policy": "models",
-    "OpponentActionWrapper": "selfplay",
-    "PolicySnapshot": "snapshot",
-    "SelfPlayCallback": "selfplay",
-    "SelfPlayVecEnv": "selfplay",
+    "load_policy": "loading",
+    "OpponentActionWrapper": "selfplay.opponents",
+    "PolicySnapshot": "loading.sb3_snapshot",
+    "SelfPlayCallback": "selfplay.callback",
+    "SelfPlayVecEnv": "selfplay.opponents",
+    "train": "sb3.trainer",
 }
 
 __all__ = [
@@ -35,6 +43,7 @@ __all__ = [
     "SelfPlayVecEnv",
     "load_policy",
     "require_train_extra",
+    "train",
 ]
 
 

@@ -1,4 +1,4 @@
-"""A training run's configuration, and the record of the physics a run was trained on.
+"""A training run's configuration, the same for both backends.
 
 Needs neither PyTorch nor Stable-Baselines3: ``foosball train`` builds its options (their
 defaults and help) from :class:`TrainConfig`'s fields, and a run's ``config.json`` is read,
@@ -10,72 +10,19 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import asdict, dataclass, field, fields
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 
-from foosball_gym.registration import __version__, check_env_id
-from foosball_gym.table import PHYSICS_REVISION
-from foosball_gym.training.files import atomic_write_text
-from foosball_gym.training.selfplay_rule import check_rule, default_threshold
+from foosball_gym.registration import check_env_id
+from foosball_gym.training.run_dir.files import atomic_write_text
+from foosball_gym.training.run_dir.physics import physics_record
+from foosball_gym.training.selfplay.rule import check_rule, default_threshold
 
 ALGORITHMS = ("ppo", "sac")
 VEC_ENV_KINDS = ("dummy", "subproc")
 LR_SCHEDULES = ("constant", "linear")
-# Runs from before config.json recorded its physics were all trained on the first revision.
-LEGACY_PHYSICS_REVISION = 1
-
-
-class PhysicsMismatchWarning(UserWarning):
-    """A model or run was trained on another revision of the simulated physics than this one."""
-
-
-def physics_record() -> dict[str, Any]:
-    """The physics this installation simulates, as a run's ``config.json`` records it.
-
-    ``revision`` is :data:`foosball_gym.table.PHYSICS_REVISION`, the one that decides whether
-    a model meets the physics it was trained on; the package and PyBullet versions are there
-    to trace a difference the revision does not explain.
-    """
-    try:
-        pybullet = metadata.version("pybullet")
-    except metadata.PackageNotFoundError:
-        pybullet = None
-    return {
-        "revision": PHYSICS_REVISION,
-        "package_version": __version__,
-        "pybullet": pybullet,
-    }
-
-
-def recorded_physics_revision(config: dict[str, Any] | None) -> int:
-    """The physics revision a run's ``config.json`` (as a dict, or None) says it trained on."""
-    physics = (config or {}).get("physics")
-    if isinstance(physics, dict) and physics.get("revision") is not None:
-        return int(physics["revision"])
-    return LEGACY_PHYSICS_REVISION
-
-
-def physics_mismatch(config: dict[str, Any] | None, name: str) -> str | None:
-    """Why ``name``, trained as ``config`` records, may not behave as it did in training; None
-    where it was trained on the current physics."""
-    recorded = recorded_physics_revision(config)
-    if recorded == PHYSICS_REVISION:
-        return None
-    if "physics" in (config or {}):
-        trained = f"{name} was trained on physics revision {recorded}"
-    else:
-        trained = (
-            f"{name} records no physics revision, so it was trained on revision {recorded} "
-            "(the record was introduced after that revision)"
-        )
-    return (
-        f"{trained}, but foosball_gym {__version__} simulates physics revision "
-        f"{PHYSICS_REVISION}: its results may differ from those it reached in training. "
-        "Retraining it on the current physics is advised."
-    )
 
 
 def _field(default: Any, doc: str) -> Any:

@@ -10,15 +10,16 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from foosball_gym.training.files import (
+from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
+from foosball_gym.training.run_dir.files import (
     CHECKPOINT_DIR,
     LATEST_FILE,
     LEGACY_NORM_FILE,
     NORM_FILE,
-    atomic_write_text,
+    read_latest,
+    write_latest,
 )
-from foosball_gym.training.snapshot import PolicySnapshot
-from foosball_gym.training.storage import SERIALIZED, load_pickled_norm, strip_pickles
+from foosball_gym.training.run_dir.storage import SERIALIZED, load_pickled_norm, strip_pickles
 
 
 def _holds_pickles(zip_path: Path) -> bool:
@@ -62,14 +63,13 @@ def migrate_run(run: str | Path, trust: bool = False) -> list[Path]:
         load_pickled_norm(legacy).save(target)
         legacy.unlink()
         written.append(target)
-    pointer_file = run / CHECKPOINT_DIR / LATEST_FILE
-    if pointer_file.exists():
-        pointer = json.loads(pointer_file.read_text())
+    pointer = read_latest(run)
+    if pointer is not None:
         name = pointer.get("vecnormalize", "")
         if name.endswith(LEGACY_NORM_FILE):
             pointer["vecnormalize"] = name[: -len(LEGACY_NORM_FILE)] + NORM_FILE
-            atomic_write_text(pointer_file, json.dumps(pointer))
-            written.append(pointer_file)
+            write_latest(run, pointer)
+            written.append(run / CHECKPOINT_DIR / LATEST_FILE)
     for zip_path in sorted(run.rglob("*.zip")):
         if _holds_pickles(zip_path):
             strip_pickles(zip_path)

@@ -1,5 +1,5 @@
-"""Games between two policies, or a policy and the scripted side, on seeded serves: what a
-league and self-play's gate play.
+"""Matches between two policies, or a policy and the scripted side, on seeded serves: what a
+league and self-play's gate play (the game itself is :mod:`foosball_gym.game`'s).
 
 Each pair plays ``games`` games, half with each side at home; game ``k`` is served with seed
 ``seed + k``, so that all pairs given the same seed meet the same serves. A game is won by the

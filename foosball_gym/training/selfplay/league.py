@@ -5,8 +5,8 @@ Ratings say what self-play's own numbers cannot: each generation only ever met t
 before it, so a rising win rate may be a cycle (A beats B beats C beats A), while a league
 rates every generation against the same field. :mod:`foosball_gym.ratings` fits them.
 
-Every pair plays the same seeded serves (:mod:`~foosball_gym.training.games`), in the game
-the run trained on (its draw for a still ball too, if it had one).
+Every pair plays the same seeded serves (:mod:`~foosball_gym.training.selfplay.matches`), in
+the game the run trained on (its draw for a still ball too, if it had one).
 """
 
 from __future__ import annotations
@@ -22,17 +22,19 @@ from typing import Any
 import numpy as np
 
 from foosball_gym.ratings import Ratings, fit_ratings
-from foosball_gym.training.files import (
-    CHECKPOINT_DIR,
+from foosball_gym.training.run_dir.files import (
     CONFIG_FILE,
-    LATEST_FILE,
+    HISTORY_FILE,
     MODEL_FILE,
+    RLLIB_BACKEND,
+    SELFPLAY_DIR,
     atomic_write_text,
+    read_latest,
 )
-from foosball_gym.training.games import Arena, PairResult, Player, play_pair
+from foosball_gym.training.selfplay.history import snapshot_file
+from foosball_gym.training.selfplay.matches import Arena, PairResult, Player, play_pair
 
 SCRIPTED = "scripted"
-SELFPLAY_DIR = "selfplay"
 LEAGUE_JSON = "league.json"
 LEAGUE_PNG = "league.png"
 
@@ -190,7 +192,7 @@ def read_run(run_dir: str | Path) -> dict[str, Any]:
     """A self-play run's ``config.json``; ValueError where ``run_dir`` is not one."""
     run_dir = Path(run_dir)
     config_path = run_dir / CONFIG_FILE
-    history_path = run_dir / SELFPLAY_DIR / "history.json"
+    history_path = run_dir / SELFPLAY_DIR / HISTORY_FILE
     if not config_path.is_file():
         raise ValueError(f"{run_dir} is not a run directory ({CONFIG_FILE} is missing)")
     if not history_path.is_file():
@@ -227,25 +229,25 @@ def run_players(
     policy's mean can play a different game (measured: the means of one run's generations,
     which never kicked a ball at each other, drew every game between them 0-0).
     """
-    from foosball_gym.training.models import load_policy
-    from foosball_gym.training.rllib_backend import BACKEND, load_rllib_snapshot
-    from foosball_gym.training.snapshot import PolicySnapshot
+    from foosball_gym.training.loading import load_policy
+    from foosball_gym.training.loading.rllib_policy import load_rllib_snapshot
+    from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
 
     run_dir = Path(run_dir)
     config = read_run(run_dir)
-    if sampled and config.get("backend") == BACKEND:
+    if sampled and config.get("backend") == RLLIB_BACKEND:
         raise ValueError(
             f"{run_dir} was trained with the rllib backend, whose snapshots act on their mean "
             "only; rate it without sampling"
         )
-    history = json.loads((run_dir / SELFPLAY_DIR / "history.json").read_text())
+    history = json.loads((run_dir / SELFPLAY_DIR / HISTORY_FILE).read_text())
     by_generation = {h["generation"]: h for h in history}
     players = []
     for g in pick_generations(list(by_generation), most_generations):
-        path = run_dir / SELFPLAY_DIR / f"opponent_{g:04d}.pt"
+        path = snapshot_file(run_dir / SELFPLAY_DIR, g)
         if not path.is_file():
             raise ValueError(f"{run_dir}: generation {g} is in history.json but {path} is missing")
-        if config.get("backend") == BACKEND:
+        if config.get("backend") == RLLIB_BACKEND:
             policy = load_rllib_snapshot(path, config)
         else:
             policy = PolicySnapshot.load(path, trust=trust)
@@ -268,10 +270,8 @@ def _final_timesteps(run_dir: Path) -> int | None:
                 return int(json.loads(archive.read("data"))["num_timesteps"])
         except (OSError, KeyError, ValueError, zipfile.BadZipFile):
             pass
-    latest = run_dir / CHECKPOINT_DIR / LATEST_FILE
-    if latest.is_file():
-        return json.loads(latest.read_text()).get("timesteps")
-    return None
+    latest = read_latest(run_dir)
+    return None if latest is None else latest.get("timesteps")
 
 
 def write_league(league: League, out: str | Path) -> tuple[Path, Path | None]:

@@ -9,13 +9,19 @@ also learns to recover from small mistakes (as in DART).
 
 from __future__ import annotations
 
+import json
+import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch as th
 from stable_baselines3.common.vec_env import VecNormalize
+
+from foosball_gym.training.config import TrainConfig
+from foosball_gym.training.run_dir.files import PRETRAIN_FILE, atomic_write_text
 
 
 @dataclass
@@ -116,3 +122,25 @@ def clone(
         policy.value_net.bias.mul_(scale)
     policy.set_training_mode(False)
     return {"action_mse": action_loss.item(), "value_mse": value_loss.item()}
+
+
+def pretrain(model: Any, config: TrainConfig, out: Path) -> None:
+    """Clone ``config.pretrain_episodes`` episodes of the scripted baseline into ``model``,
+    and record how it went in the run's ``pretrain.json``."""
+    start = time.perf_counter()
+    demos = collect(
+        config.env_id,
+        config.env_kwargs,
+        config.pretrain_episodes,
+        config.gamma,
+        seed=config.seed,
+    )
+    fit = clone(model, demos, seed=config.seed)
+    record = {
+        "episodes": config.pretrain_episodes,
+        "samples": len(demos.actions),
+        "scripted_success_rate": demos.success_rate,
+        **fit,
+        "seconds": round(time.perf_counter() - start, 2),
+    }
+    atomic_write_text(out / PRETRAIN_FILE, json.dumps(record, indent=2))

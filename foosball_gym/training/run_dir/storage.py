@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym.training.files import LEGACY_NORM_FILE, atomic_write_text
+from foosball_gym.training.run_dir.files import LEGACY_NORM_FILE, atomic_write_text
 
 NORM_FORMAT = 1
 # SB3 marks each field it cloudpickled with this key, next to a readable description.

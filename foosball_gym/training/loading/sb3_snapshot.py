@@ -18,7 +18,7 @@ import numpy as np
 import torch as th
 from gymnasium import spaces
 
-from foosball_gym.training.storage import refusal
+from foosball_gym.training.run_dir.storage import refusal
 
 SNAPSHOT_FORMAT = 1
 
@@ -40,8 +40,9 @@ def policy_from_state_dict(state: Mapping[str, Any]) -> Any:
     """The SB3 ``MlpPolicy`` (PPO's or SAC's) these weights belong to, holding them.
 
     Its layer sizes and its observation and action sizes are read off the weights; the
-    activations are SB3's defaults, which is what :func:`~foosball_gym.training.run.build_model`
-    uses. Actions are in [-1, 1], as in every environment of this package.
+    activations are SB3's defaults, which is what
+    :func:`~foosball_gym.training.sb3.model.build_model` uses. Actions are in [-1, 1], as in
+    every environment of this package.
 
     Raises:
         ValueError: the weights are not of a policy that can be rebuilt this way.

@@ -24,7 +24,7 @@ import copy
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from foosball_gym.training.games import Arena, Player, play_pair
+from foosball_gym.training.selfplay.matches import Arena, Player, play_pair
 
 # Gate games are served with seeds from here on, offset by the learner's step count, so that
 # no two gates meet the same serves and none meets a league's (seeds 0 onwards).

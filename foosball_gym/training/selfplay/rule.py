@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -49,6 +50,11 @@ def check_rule(rule: str, threshold: float) -> None:
             f"the significant rule's threshold is a test level and must lie in (0, 0.5), "
             f"got {threshold}"
         )
+
+
+def game_result(info: Mapping[str, Any]) -> int:
+    """+1 won, -1 lost, 0 drawn, from the info of a game's last step (of the learner's side)."""
+    return int(np.sign(info.get("goals_for", 0) - info.get("goals_against", 0)))
 
 
 def sign_test(wins: int, losses: int) -> float:
@@ -156,29 +162,3 @@ class ReplacementRule:
             "selfplay/games": self.games,
             "selfplay/elo": performance_elo(res, self.opponent_elo),
         }
-
-
-def history_record(
-    generation: int,
-    timesteps: int,
-    games: int,
-    rule: ReplacementRule,
-    score: float | None,
-    elo: float,
-) -> dict[str, Any]:
-    """One line of a run's ``selfplay/history.json``: a snapshot, when and why it was taken."""
-    return {
-        "generation": generation,
-        "timesteps": int(timesteps),
-        "games": int(games),
-        "rule": rule.rule,
-        "score": score,
-        "elo": float(elo),
-    }
-
-
-def restored_elo(history: list[dict[str, Any]], generations: list[int]) -> float:
-    """The mean rating of ``generations`` as ``history`` records them (0 where it has none:
-    runs from before ratings were recorded)."""
-    by_generation = {h["generation"]: h.get("elo") or 0.0 for h in history}
-    return float(np.mean([by_generation.get(g, 0.0) for g in generations]))

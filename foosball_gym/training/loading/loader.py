@@ -1,7 +1,8 @@
-"""Loading trained policies: from a run directory, a model zip, or a shipped name.
+"""Loading a trained policy to play: from a run directory of either backend, a model zip, or
+a shipped name: ``builtin:NAME``, one of the run directories in ``foosball_gym/builtin/``.
 
-The policies shipped with the package live in ``foosball_gym/builtin/NAME/``, one run
-directory each, and load as ``builtin:NAME``.
+Imports no trainer: an exported RLlib policy is read without Ray, an SB3 model without its
+algorithm.
 """
 
 from __future__ import annotations
@@ -16,19 +17,16 @@ from typing import Any
 import numpy as np
 
 from foosball_gym.policy_io.task import residual_action
-from foosball_gym.training.config import PhysicsMismatchWarning, physics_mismatch
-from foosball_gym.training.files import CONFIG_FILE, LEGACY_NORM_FILE, MODEL_FILE, NORM_FILE
-from foosball_gym.training.snapshot import PolicySnapshot, policy_from_state_dict
-from foosball_gym.training.storage import UntrustedFileError, read_model_zip, read_norm
-
-__all__ = [
-    "LoadedPolicy",
-    "ModelLoadError",
-    "PhysicsMismatchWarning",
-    "builtin_names",
-    "builtin_path",
-    "load_policy",
-]
+from foosball_gym.training.loading.rllib_policy import is_rllib_run, load_rllib_policy
+from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot, policy_from_state_dict
+from foosball_gym.training.run_dir.files import (
+    CONFIG_FILE,
+    LEGACY_NORM_FILE,
+    MODEL_FILE,
+    NORM_FILE,
+)
+from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning, physics_mismatch
+from foosball_gym.training.run_dir.storage import UntrustedFileError, read_model_zip, read_norm
 
 
 class ModelLoadError(ValueError):
@@ -138,9 +136,6 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     else:
         path = Path(text)
     if path.is_dir():
-        # Imported here: the RLlib backend's module imports this one's neighbours.
-        from foosball_gym.training.rllib_backend import is_rllib_run, load_rllib_policy
-
         if is_rllib_run(path):
             try:
                 rllib = load_rllib_policy(path)

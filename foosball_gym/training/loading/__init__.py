@@ -1,0 +1,23 @@
+"""Loading trained policies to play or to rate: :func:`load_policy` reads a run directory of
+either backend, a model zip or ``builtin:NAME``.
+
+Needs PyTorch and Stable-Baselines3 (the ``train`` extra), and never imports a trainer or Ray.
+"""
+
+from foosball_gym.training.loading.loader import (
+    LoadedPolicy,
+    ModelLoadError,
+    builtin_names,
+    builtin_path,
+    load_policy,
+)
+from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning
+
+__all__ = [
+    "LoadedPolicy",
+    "ModelLoadError",
+    "PhysicsMismatchWarning",
+    "builtin_names",
+    "builtin_path",
+    "load_policy",
+]

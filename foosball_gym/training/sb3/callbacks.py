@@ -1,0 +1,114 @@
+"""The callbacks every Stable-Baselines3 run has: its evaluation curve and best model, its
+checkpoints, and its stop on a signal."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from stable_baselines3.common.callbacks import BaseCallback
+
+from foosball_gym.evaluation import evaluate
+from foosball_gym.training.config import TrainConfig
+from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
+from foosball_gym.training.run_dir.best import BestModel
+from foosball_gym.training.run_dir.curve import EVAL_SEED, EvalCurve, eval_row
+from foosball_gym.training.run_dir.files import (
+    CHECKPOINT_DIR,
+    MODEL_FILE,
+    NORM_FILE,
+    write_latest,
+)
+from foosball_gym.training.run_dir.storage import save_model
+from foosball_gym.training.signals import SignalStop
+
+
+class EvalCurveCallback(BaseCallback):
+    """Every ``eval_freq`` steps: evaluate on seeded episodes, add the row to eval.csv and its
+    plot, and keep the best model so far in ``best/``."""
+
+    def __init__(self, config: TrainConfig, out: Path, wall_offset: float = 0.0) -> None:
+        super().__init__()
+        self.config = config
+        self.curve = EvalCurve(out, config.env_id)
+        self.best = BestModel(out)
+        self.wall_offset = wall_offset
+        self._start = time.perf_counter()
+        self._next = 0
+        self.reached: dict[str, Any] | None = None
+
+    def _on_training_start(self) -> None:
+        self._start = time.perf_counter()
+        self._next = (self.num_timesteps // self.config.eval_freq + 1) * self.config.eval_freq
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps < self._next:
+            return True
+        self._next += self.config.eval_freq
+        return self.run_eval()
+
+    def pause_clock(self, seconds: float) -> None:
+        """Leave ``seconds`` out of the curve's ``wall_seconds``: time spent on what is no
+        part of learning (recording clips), so that runs compare on their training time."""
+        self._start += seconds
+
+    def run_eval(self) -> bool:
+        res = evaluate(
+            PolicySnapshot.of_model(self.model),
+            self.config.env_id,
+            self.config.env_kwargs,
+            episodes=self.config.eval_episodes,
+            seed=EVAL_SEED,
+        )
+        wall = self.wall_offset + time.perf_counter() - self._start
+        row = eval_row(res, self.num_timesteps, wall)
+        self.curve.append(row)
+        self.logger.record("eval/success_rate", res.success_rate)
+        self.logger.record("eval/mean_reward", res.mean_reward)
+        self.best.offer(row, self._save_best)
+        target = self.config.target_success
+        if target is not None and res.success_rate >= target:
+            self.reached = row
+            return False
+        return True
+
+    def _save_best(self, best: Path) -> None:
+        save_model(self.model, best / MODEL_FILE, best / NORM_FILE)
+
+
+class CheckpointCallback(BaseCallback):
+    """Every ``every`` steps write model, normalisation and a pointer to them, atomically."""
+
+    def __init__(self, out: Path, every: int) -> None:
+        super().__init__()
+        self.out = out
+        self.dir = out / CHECKPOINT_DIR
+        self.every = every
+        self._next = 0
+
+    def _on_training_start(self) -> None:
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self._next = (self.num_timesteps // self.every + 1) * self.every
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self._next:
+            self._next += self.every
+            self.write()
+        return True
+
+    def write(self) -> None:
+        self.dir.mkdir(parents=True, exist_ok=True)
+        name = f"model_{self.num_timesteps:010d}"
+        save_model(self.model, self.dir / f"{name}.zip", self.dir / f"{name}_{NORM_FILE}")
+        pointer = {"model": f"{name}.zip", "timesteps": int(self.num_timesteps)}
+        if self.model.get_vec_normalize_env() is not None:
+            pointer["vecnormalize"] = f"{name}_{NORM_FILE}"
+        write_latest(self.out, pointer)
+
+
+class StopOnSignal(SignalStop, BaseCallback):
+    """SB3's face of :class:`SignalStop`: ends ``learn`` at the next step after a signal."""
+
+    def _on_step(self) -> bool:
+        return self.signum is None

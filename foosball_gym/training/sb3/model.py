@@ -1,0 +1,93 @@
+"""A run's Stable-Baselines3 model: built from its configuration, or from its last checkpoint
+without unpickling anything."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from stable_baselines3 import PPO, SAC
+from stable_baselines3.common.vec_env import VecNormalize
+
+from foosball_gym.training.config import ALGORITHMS, TrainConfig
+from foosball_gym.training.run_dir.files import (
+    CHECKPOINT_DIR,
+    LEGACY_NORM_FILE,
+    MODEL_FILE,
+    NORM_FILE,
+    TB_DIR,
+    read_latest,
+)
+from foosball_gym.training.run_dir.storage import read_model_zip, read_norm
+
+ALGOS = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
+
+
+def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
+    policy_kwargs = {"net_arch": list(config.net_arch)}
+    lr = config.learning_rate
+    common = {
+        # SB3 calls a schedule with the progress remaining, from 1 down to 0.
+        "learning_rate": (lambda remaining: lr * remaining)
+        if config.lr_schedule == "linear"
+        else lr,
+        "gamma": config.gamma,
+        "seed": config.seed,
+        "device": "cpu",
+        "verbose": 0,
+        "tensorboard_log": None if tb_dir is None else str(tb_dir),
+    }
+    if config.algo == "ppo":
+        policy_kwargs["log_std_init"] = config.log_std_init
+        return PPO(
+            "MlpPolicy",
+            venv,
+            n_steps=config.n_steps,
+            batch_size=config.batch_size,
+            n_epochs=config.n_epochs,
+            gae_lambda=config.gae_lambda,
+            clip_range=config.clip_range,
+            target_kl=config.target_kl,
+            policy_kwargs=policy_kwargs,
+            **common,
+        )
+    return SAC(
+        "MlpPolicy", venv, batch_size=config.batch_size, policy_kwargs=policy_kwargs, **common
+    )
+
+
+def load_checkpoint(config: TrainConfig, out: Path, venv: Any) -> tuple[Any, int]:
+    """The model of the run's last checkpoint (or its final model), and its timesteps.
+
+    The model is built from the run's configuration and given the checkpoint's weights and
+    optimiser state, read as tensors, so nothing is unpickled. A checkpoint of a run from
+    before (with ``vecnormalize.pkl``) is refused, with how to migrate it.
+    """
+    pointer = read_latest(out)
+    if pointer is not None:
+        zip_path = out / CHECKPOINT_DIR / pointer["model"]
+        norm_path = (
+            out / CHECKPOINT_DIR / pointer["vecnormalize"] if "vecnormalize" in pointer else None
+        )
+    else:
+        zip_path = out / MODEL_FILE
+        found = [out / n for n in (NORM_FILE, LEGACY_NORM_FILE) if (out / n).exists()]
+        norm_path = found[0] if found else None
+    if norm_path is not None and isinstance(venv, VecNormalize):
+        read_norm(norm_path, out, trust=False).apply(venv)
+    try:
+        data, params, variables = read_model_zip(zip_path)
+    except ValueError as err:
+        raise ValueError(f"cannot resume from {zip_path}: {err}") from None
+    model = build_model(config, venv, out / TB_DIR)
+    try:
+        model.set_parameters(params, exact_match=True, device="cpu")
+    except (ValueError, RuntimeError) as err:
+        raise ValueError(f"{zip_path} does not fit the run's configuration: {err}") from None
+    for name, value in (variables or {}).items():
+        if value is not None:
+            getattr(model, name).data = value.data
+    steps = int(pointer["timesteps"]) if pointer else int(data.get("num_timesteps", 0))
+    model.num_timesteps = steps
+    model._n_updates = int(data.get("_n_updates", 0))
+    return model, steps

@@ -1,0 +1,226 @@
+"""A Stable-Baselines3 training run: :func:`train` starts, resumes or lengthens one.
+
+Its configuration is :class:`~foosball_gym.training.config.TrainConfig`; the files it writes
+are listed in :mod:`foosball_gym.training.run_dir.files`.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch as th
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.vec_env import VecNormalize
+
+from foosball_gym.table import PHYSICS_REVISION
+from foosball_gym.training.config import TrainConfig
+from foosball_gym.training.run_dir.curve import EvalCurve
+from foosball_gym.training.run_dir.files import (
+    CONFIG_FILE,
+    MODEL_FILE,
+    NORM_FILE,
+    SELFPLAY_DIR,
+    TB_DIR,
+    atomic_write_text,
+    clear_stale,
+    has_checkpoint,
+)
+from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning, physics_mismatch
+from foosball_gym.training.run_dir.storage import save_model
+from foosball_gym.training.sb3.callbacks import CheckpointCallback, EvalCurveCallback, StopOnSignal
+from foosball_gym.training.sb3.model import build_model, load_checkpoint
+from foosball_gym.training.sb3.pretrain import pretrain
+from foosball_gym.training.sb3.teacher import TeacherCallback
+from foosball_gym.training.sb3.vec_env import make_env
+from foosball_gym.training.sb3.videos import VideoCallback
+from foosball_gym.training.selfplay.callback import SelfPlayCallback
+from foosball_gym.training.selfplay.gate import ReplacementGate
+
+
+@dataclass
+class TrainResult:
+    """What a call of :func:`train` did.
+
+    ``signal`` is the number of the signal (SIGINT, SIGTERM) that stopped the run before its
+    budget, after a checkpoint was written; None where it ran to the end.
+    """
+
+    out: Path
+    timesteps: int
+    seconds: float
+    reached: dict[str, float] | None
+    signal: int | None = None
+
+
+def _extended(config: TrainConfig, timesteps: int, out: Path) -> TrainConfig:
+    """``config`` with its run lengthened to ``timesteps`` (refused where that cannot be)."""
+    if timesteps <= config.timesteps:
+        raise ValueError(
+            f"the run in {out} trains {config.timesteps} steps; a resume can only extend it, "
+            f"not to {timesteps}"
+        )
+    if config.lr_schedule != "constant":
+        raise ValueError(
+            f"the run in {out} decays its learning rate to 0 over {config.timesteps} steps "
+            f"(lr_schedule {config.lr_schedule}); a longer run would start the decay over: "
+            "resume it as it is, or train a new run"
+        )
+    config.timesteps = timesteps
+    return config
+
+
+def _record_extension(config: TrainConfig, out: Path) -> None:
+    """Write a checked extension into ``config.json``, the rest of the file kept."""
+    data = json.loads((out / CONFIG_FILE).read_text())
+    data["timesteps"] = config.timesteps
+    atomic_write_text(out / CONFIG_FILE, json.dumps(data, indent=2))
+
+
+def train(
+    config: TrainConfig,
+    out: str | Path,
+    progress_bar: bool = False,
+    resume: bool = False,
+    callbacks: list[BaseCallback] | None = None,
+    timesteps: int | None = None,
+) -> TrainResult:
+    """Train (or, with ``resume``, continue) the run in directory ``out``.
+
+    Everything is checked, the envs and the model built, before ``config.json`` is written,
+    so a start that fails leaves no run behind. A directory with a ``config.json`` but no
+    checkpoint (a start stopped before its first one) is no run either: a new one may start
+    there, and ``resume`` starts it over from its configuration.
+
+    SIGINT (Ctrl-C) or SIGTERM during training end it at the next step with a checkpoint
+    written; the result's ``signal`` says which arrived.
+
+    Args:
+        config: the run's configuration (ignored with ``resume``: the run's own is read).
+        out: the run directory.
+        progress_bar: show SB3's progress bar.
+        resume: continue from the last checkpoint in ``out`` (or its final model).
+        callbacks: extra SB3 callbacks, run after the run's own.
+        timesteps: with ``resume``, train on to this many steps in all, past the run's own
+            ``timesteps`` (written into its ``config.json``), so that a long run can go on
+            over several sittings.
+    """
+    out = Path(out)
+    if timesteps is not None and not resume:
+        raise ValueError("timesteps extends a resumed run; a new run takes config.timesteps")
+    if resume:
+        config = TrainConfig.load(out / CONFIG_FILE)
+        if timesteps is not None:
+            config = _extended(config, int(timesteps), out)
+        mismatch = physics_mismatch(json.loads((out / CONFIG_FILE).read_text()), f"the run {out}")
+        if mismatch:
+            # config.json keeps the old revision, so the resumed model goes on warning as well.
+            warnings.warn(
+                f"{mismatch} Resuming continues it on revision {PHYSICS_REVISION}.",
+                PhysicsMismatchWarning,
+                stacklevel=2,
+            )
+    config.check()
+    if timesteps is not None:
+        # Only once the lengthened configuration is known to be sound.
+        _record_extension(config, out)
+    th.set_num_threads(config.torch_threads)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out} is a file, not a run directory")
+    continuing = resume and has_checkpoint(out)
+    if not resume and has_checkpoint(out):
+        raise ValueError(
+            f"{out} already holds a run; use --resume to continue it or choose another --out"
+        )
+    out.mkdir(parents=True, exist_ok=True)
+
+    venv = make_env(config)
+    done_steps, wall_offset = 0, 0.0
+    try:
+        if continuing:
+            model, done_steps = load_checkpoint(config, out, venv)
+            wall_offset = EvalCurve(out, config.env_id).wall_seconds()
+        else:
+            model = build_model(config, venv, out / TB_DIR)
+            clear_stale(out)
+            config.save(out / CONFIG_FILE)
+    except BaseException:
+        venv.close()
+        raise
+    if not continuing and config.pretrain_episodes:
+        pretrain(model, config, out)
+
+    if config.pretrain_episodes and isinstance(venv, VecNormalize):
+        # The clone was fitted to observations scaled by the demonstrations' statistics; left
+        # to follow PPO's rollouts they drift, and the unchanged network then plays worse
+        # (Score from rest: a clone at 86 % fell to 6-30 % with the learning rate at 1e-12).
+        venv.training = False
+
+    stop = StopOnSignal()
+    checkpoint = CheckpointCallback(out, config.checkpoint_freq)
+    own: list[BaseCallback] = [stop, checkpoint]
+    if config.self_play:
+        own.append(
+            SelfPlayCallback(
+                window=config.selfplay_window,
+                threshold=config.selfplay_threshold,
+                rule=config.selfplay_rule,
+                pool_size=config.selfplay_pool,
+                save_dir=out / SELFPLAY_DIR,
+                verbose=1,
+                sampled=config.selfplay_sampled,
+                gate=(
+                    ReplacementGate(config.env_id, config.env_kwargs, config.selfplay_gate)
+                    if config.selfplay_gate
+                    else None
+                ),
+            )
+        )
+    if config.teacher_steps:
+        own.append(
+            TeacherCallback(
+                config.env_id,
+                config.env_kwargs,
+                config.teacher_steps,
+                seed=config.seed,
+                teacher=config.teacher,
+            )
+        )
+    evaluations = EvalCurveCallback(config, out, wall_offset)
+    own.append(evaluations)
+    if config.video_every is not None:
+        own.append(VideoCallback(config, out, evaluations))
+
+    start = time.perf_counter()
+    remaining = max(config.timesteps - done_steps, 0)
+    try:
+        if remaining:
+            with stop.installed():
+                model.learn(
+                    remaining,
+                    callback=CallbackList(own + list(callbacks or [])),
+                    progress_bar=progress_bar,
+                    reset_num_timesteps=not continuing,
+                    tb_log_name="run",
+                )
+        if stop.signum is not None:
+            checkpoint.num_timesteps = model.num_timesteps
+            checkpoint.write()
+            return TrainResult(
+                out, int(model.num_timesteps), time.perf_counter() - start, None, stop.signum
+            )
+        rows = evaluations.curve.rows()
+        if evaluations.reached is None and (
+            not rows or rows[-1]["timesteps"] < model.num_timesteps
+        ):
+            evaluations.init_callback(model)  # a last point for the curve at the final timestep
+            evaluations.run_eval()
+        save_model(model, out / MODEL_FILE, out / NORM_FILE)
+    finally:
+        venv.close()
+    return TrainResult(
+        out, int(model.num_timesteps), time.perf_counter() - start, evaluations.reached
+    )

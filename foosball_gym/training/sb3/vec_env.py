@@ -1,0 +1,69 @@
+"""The vectorised training envs of a run: Dummy or Subproc, with self-play's opponents and
+VecNormalize as the configuration asks."""
+
+from __future__ import annotations
+
+import signal
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+
+import foosball_gym.registration  # noqa: F401  (the package registers the ids)
+from foosball_gym.training.config import VEC_ENV_KINDS, TrainConfig
+from foosball_gym.training.selfplay.opponents import OpponentActionWrapper, SelfPlayVecEnv
+
+
+def _ignoring_sigint(env_fn: Callable[[], Any]) -> Callable[[], Any]:
+    def make() -> Any:
+        # Ctrl-C reaches every process of the terminal's group; the main process alone stops
+        # the run, after writing a checkpoint, and a worker gone first would break its last
+        # steps.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        # This function reaches the worker by value, so nothing has registered the ids there.
+        import foosball_gym.registration  # noqa: F401, F811
+
+        return env_fn()
+
+    return make
+
+
+def subproc_vec_env(env_fns: list[Callable[[], Any]], **kwargs: Any) -> SubprocVecEnv:
+    """``SubprocVecEnv`` whose workers ignore SIGINT."""
+    return SubprocVecEnv([_ignoring_sigint(fn) for fn in env_fns], **kwargs)
+
+
+VEC_ENVS = dict(zip(VEC_ENV_KINDS, (DummyVecEnv, subproc_vec_env), strict=True))
+
+
+def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
+    """The vectorised training envs (with self-play and normalisation wrappers as configured)."""
+    wrapper = OpponentActionWrapper if config.self_play else None
+    venv = make_vec_env(
+        config.env_id,
+        n_envs=config.n_envs,
+        seed=config.seed + seed_offset,
+        env_kwargs=config.env_kwargs,
+        wrapper_class=wrapper,
+        vec_env_cls=VEC_ENVS[config.vec_env],
+    )
+    if config.self_play:
+        # The first opponent is replaced by a snapshot of the learner as training starts.
+        n = venv.action_space.shape[0] // 2
+        anchor = None
+        if config.selfplay_scripted_share:
+            anchor = venv.env_method("scripted_opponent", indices=[0])[0]
+        venv = SelfPlayVecEnv(
+            venv,
+            lambda obs: np.zeros((len(obs), n), np.float32),
+            config.seed,
+            anchor=anchor,
+            anchor_share=config.selfplay_scripted_share,
+        )
+    if config.normalize or config.normalize_reward:
+        venv = VecNormalize(
+            venv, norm_obs=config.normalize, norm_reward=config.normalize_reward, gamma=config.gamma
+        )
+    return venv

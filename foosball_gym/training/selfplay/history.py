@@ -1,0 +1,94 @@
+"""A self-play run's ``selfplay/`` folder: its snapshots, ``opponent_<generation>.pt``, and
+``history.json``, one record per snapshot (when it was taken and why), from which a resumed
+run rebuilds its pool of opponents and its rule's count.
+
+Shared by the Stable-Baselines3 callback and the RLlib backend, whose snapshots differ (a
+policy with its normalisation; a module's state) but whose history is the same. Needs
+neither PyTorch nor either learning library.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from foosball_gym.training.run_dir.files import HISTORY_FILE, atomic_write_text
+from foosball_gym.training.selfplay.rule import ReplacementRule
+
+
+def snapshot_file(save_dir: Path, generation: int) -> Path:
+    """Where the snapshot of ``generation`` is saved in ``save_dir``."""
+    return save_dir / f"opponent_{generation:04d}.pt"
+
+
+def history_record(
+    generation: int,
+    timesteps: int,
+    games: int,
+    rule: ReplacementRule,
+    score: float | None,
+    elo: float,
+) -> dict[str, Any]:
+    """One line of a run's ``selfplay/history.json``: a snapshot, when and why it was taken."""
+    return {
+        "generation": generation,
+        "timesteps": int(timesteps),
+        "games": int(games),
+        "rule": rule.rule,
+        "score": score,
+        "elo": float(elo),
+    }
+
+
+def restored_elo(history: list[dict[str, Any]], generations: list[int]) -> float:
+    """The mean rating of ``generations`` as ``history`` records them (0 where it has none:
+    runs from before ratings were recorded)."""
+    by_generation = {h["generation"]: h.get("elo") or 0.0 for h in history}
+    return float(np.mean([by_generation.get(g, 0.0) for g in generations]))
+
+
+class SnapshotHistory:
+    """The records of a run's snapshots, kept with the replacement rule that judges them.
+
+    Args:
+        save_dir: the run's ``selfplay/``; None keeps the records in memory only.
+        rule: the run's rule: a restore sets its count of games, and every change of the pool
+            its opponents' rating.
+        pool_size: how many of the latest snapshots play as opponents.
+    """
+
+    def __init__(self, save_dir: Path | None, rule: ReplacementRule, pool_size: int) -> None:
+        self.save_dir = save_dir
+        self.rule = rule
+        self.pool_size = pool_size
+        self.records: list[dict[str, Any]] = []
+
+    def saved(self) -> bool:
+        """Whether ``save_dir`` holds a history to go on from."""
+        return self.save_dir is not None and (self.save_dir / HISTORY_FILE).exists()
+
+    def restore(self) -> list[int]:
+        """Read ``history.json``: the generations of the pool, oldest first. The rule counts
+        on from the games played so far and rates the pool as it was rated."""
+        assert self.save_dir is not None
+        self.records = json.loads((self.save_dir / HISTORY_FILE).read_text())
+        pool = [h["generation"] for h in self.records][-self.pool_size :]
+        self.rule.games = self.records[-1]["games"]
+        self.rule.opponent_elo = restored_elo(self.records, pool)
+        return pool
+
+    def add(
+        self, generation: int, timesteps: int, score: float | None, elo: float, pool: list[int]
+    ) -> None:
+        """Record the snapshot of ``generation`` (its file written already), now in the pool
+        of ``pool``'s generations, and write ``history.json``."""
+        self.records.append(
+            history_record(generation, timesteps, self.rule.games, self.rule, score, elo)
+        )
+        self.rule.opponent_elo = restored_elo(self.records, pool)
+        if self.save_dir is not None:
+            self.save_dir.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(self.save_dir / HISTORY_FILE, json.dumps(self.records, indent=1))
