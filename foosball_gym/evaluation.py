@@ -103,7 +103,8 @@ def evaluate(
 
     Args:
         policy: a callable from one observation to one action.
-        env_id, env_kwargs: the environment.
+        env_id: the environment.
+        env_kwargs: its options, as keyword arguments of ``gymnasium.make``.
         opponent: for two-player envs, the away side's policy (None: the env's default).
         video: write the first ``video_episodes`` episodes, rendered, one after the other
             into this file: .mp4 or .gif, by its suffix. Frames are 640 x 360 unless

@@ -82,8 +82,9 @@ class TableStateEstimator:
         """The observation, from the encoders' joint values and the filters' estimates.
 
         Args:
-            own_pos, own_vel: joint values in the builder's layout (slides of
+            own_pos: joint values in the builder's layout (slides of
                 ``builder.rods_in_play``, then spins); the tracked rods' entries are replaced.
+            own_vel: joint velocities, in the same layout.
         """
         pos, vel = list(own_pos), list(own_vel)
         if len(pos) != 2 * self._n or len(vel) != 2 * self._n:

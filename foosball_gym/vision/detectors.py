@@ -35,8 +35,9 @@ class ColourBallDetector:
     is searched first, and the whole frame only when the ball is not found there.
 
     Args:
-        hsv_low, hsv_high: the ball's colour range in OpenCV's HSV (H in 0-179); the defaults
-            match the simulator's orange ball (and exclude the shaded brown walls).
+        hsv_low: the low end of the ball's colour range in OpenCV's HSV (H in 0-179); the
+            defaults match the simulator's orange ball (and exclude the shaded brown walls).
+        hsv_high: the high end of that range.
         min_area_px: smaller blobs are noise.
         max_area_px: larger blobs are not the ball (0: no limit).
         roi_px: half the side of the window searched first (0: always the whole frame).

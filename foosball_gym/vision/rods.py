@@ -47,8 +47,9 @@ class RodTracker:
     Args:
         calibration: the camera.
         rods: the rods to track (one team's).
-        hsv_low, hsv_high: the figurines' colour in OpenCV's HSV (H in 0-179); the default is
-            the simulator's near-black away team.
+        hsv_low: the low end of the figurines' colour range in OpenCV's HSV (H in 0-179); the
+            default is the simulator's near-black away team.
+        hsv_high: the high end of that range.
         min_area_px: smaller blobs are noise.
     """
 

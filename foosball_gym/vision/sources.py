@@ -30,7 +30,9 @@ class OpenCVSource:
 
     Args:
         source: a camera index, or the path of a video file.
-        width, height, fps: settings asked of a camera (a file keeps its own).
+        width: the frame width asked of a camera (a file keeps its own).
+        height: the frame height asked of a camera.
+        fps: the frame rate asked of a camera.
     """
 
     def __init__(
