@@ -257,8 +257,6 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
 
     # ------------------------------------------------------------------ policies
 
-    # ------------------------------------------------------------------ policies
-
     def scripted_policy(self) -> ScriptedTeam:
         """The scripted baseline for the learner's side of this task."""
         return self.task.scripted_policy(self.obs_builder.names, self._estimated is None)

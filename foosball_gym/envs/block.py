@@ -70,7 +70,7 @@ class BlockEnv(FoosballEnv):
 
     ## Version History
     - v0: first version.
-    - v0, physics revision 2: the faithful table (README, "The simulated table");
+    - v0, physics revision 2: the faithful table (the documentation's "The simulated table");
       `control_hz` replaces `substeps`.
     - v0: `serve_x_range`, `serve_y_range` and `bank_share`; their defaults serve what
       v0 always served, seed for seed.

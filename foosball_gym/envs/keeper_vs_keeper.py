@@ -67,7 +67,7 @@ class KeeperVsKeeperEnv(FoosballEnv):
 
     ## Version History
     - v0: first version.
-    - v0, physics revision 2: the faithful table (README, "The simulated table");
+    - v0, physics revision 2: the faithful table (the documentation's "The simulated table");
       `control_hz` replaces `substeps`.
     - v0: `continuous`, a match of many serves.
     - v0: the options are the class's keyword arguments.

@@ -71,7 +71,7 @@ class ScoreEnv(FoosballEnv):
 
     ## Version History
     - v0: first version.
-    - v0, physics revision 2: the faithful table (README, "The simulated table");
+    - v0, physics revision 2: the faithful table (the documentation's "The simulated table");
       `control_hz` replaces `substeps`.
     - v0: `serve_x_range`, `serve_y_range` and `bank_share`, as Block's.
     - v0: the options are the class's keyword arguments; `opponent`, which Score took only

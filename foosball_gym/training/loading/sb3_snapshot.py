@@ -91,8 +91,10 @@ class PolicySnapshot:
 
     Args:
         policy: an SB3 ``BasePolicy``; it is deep-copied, so later training does not change it.
-        obs_mean, obs_var: running statistics of ``VecNormalize`` (None: no normalisation).
-        clip_obs, epsilon: ``VecNormalize``'s clipping and epsilon.
+        obs_mean: the running mean of ``VecNormalize`` (None: no normalisation).
+        obs_var: the running variance of ``VecNormalize`` (None: no normalisation).
+        clip_obs: ``VecNormalize``'s clipping of normalised observations.
+        epsilon: ``VecNormalize``'s epsilon under the square root.
         generation: a label (the self-play generation this snapshot was taken at).
         env_id: the environment it was trained on, where known (error messages name it).
         deterministic: act on the policy's mean (True), or sample from its distribution as the
