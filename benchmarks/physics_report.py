@@ -19,8 +19,7 @@ import statistics
 import time
 from collections.abc import Callable
 
-from foosball_gym import physics_probes
-from foosball_gym import table as T
+from foosball_gym import physics_probes, table
 
 try:
     from foosball_gym.sim import TableSim
@@ -171,7 +170,7 @@ def measure(grid: dict, sim_kwargs: dict) -> dict:
         "physics_hz": getattr(probe, "physics_hz", None),
         "control_hz": getattr(probe, "control_hz", None),
         "contact_travel": getattr(probe, "contact_travel", None),
-        "physics_revision": getattr(T, "PHYSICS_REVISION", None),
+        "physics_revision": getattr(table, "PHYSICS_REVISION", None),
     }
     probe.close()
     report["wall_seconds"] = time.perf_counter() - start

@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.evaluation import evaluate, wilson_interval
 from foosball_gym.hardware.safety import SafetyError
 from foosball_gym.play.stack import play_sim
@@ -38,14 +38,14 @@ ENV = "Foosball-Block-v0"
 def render_times(frames: int = 40) -> None:
     print("render, ms per frame (median)        whole  layered")
     rng = np.random.default_rng(0)
-    for label, rods in (("1 rod ", ["home_keeper"]), ("8 rods", [r.name for r in T.RODS])):
+    for label, rods in (("1 rod ", ["home_keeper"]), ("8 rods", [r.name for r in table.RODS])):
         sim = TableSim(rods)
         for size in ((320, 180), (640, 360)):
             times = {True: [], False: []}
             for _ in range(frames):
                 slides = [rng.uniform(-r.slide_limit, r.slide_limit) for r in sim.rods]
                 spins = list(rng.uniform(-1.5, 1.5, len(sim.rods)))
-                ball = [rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3), T.BALL_RADIUS]
+                ball = [rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3), table.BALL_RADIUS]
                 sim.show(slides + spins, ball)
                 for layered in (False, True):
                     start = time.perf_counter()

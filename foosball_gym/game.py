@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.observations import mirrored_builder
 from foosball_gym.policy_io.task import Joint, TaskInterface, action_joints, check_action
@@ -79,7 +79,7 @@ class Game:
             raise ValueError(f"{type(task).__name__} has no opponent to set")
         self.task, self.interface, self.sim = task, interface, sim
         self.stagnation_steps = int(stagnation_steps)
-        self.rods = [T.rod(name) for name in layout.rods]
+        self.rods = [table.rod(name) for name in layout.rods]
         n = len(self.rods)
         self._index = {
             (name, kind): i + (n if kind == "spin" else 0)
@@ -200,9 +200,9 @@ class Game:
         """One control step of physics with the rods' targets as last commanded."""
         goal, out = self.sim.step()
         self.read_state()
-        if goal == T.HOME_SCORED:
+        if goal == table.HOME_SCORED:
             self.goals_for += 1
-        elif goal == T.AWAY_SCORED:
+        elif goal == table.AWAY_SCORED:
             self.goals_against += 1
         return Outcome(goal, out, self._stagnated())
 

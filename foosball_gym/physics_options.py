@@ -7,14 +7,14 @@ import math
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 
 
 def check_physics(
     physics_hz: object,
     control_hz: object,
-    contact_travel: object = T.CONTACT_TRAVEL,
-    rolling_resistance: object = T.ROLLING_RESISTANCE,
+    contact_travel: object = table.CONTACT_TRAVEL,
+    rolling_resistance: object = table.ROLLING_RESISTANCE,
 ) -> tuple[int, int, float, float]:
     """Validate the physics options; returns them as (int, int, float, float).
 
@@ -50,8 +50,8 @@ def check_physics(
 
 #: The physics options every environment takes, with their defaults, in check_physics' order.
 PHYSICS_DEFAULTS = {
-    "physics_hz": T.PHYSICS_HZ,
-    "control_hz": T.CONTROL_HZ,
-    "contact_travel": T.CONTACT_TRAVEL,
-    "rolling_resistance": T.ROLLING_RESISTANCE,
+    "physics_hz": table.PHYSICS_HZ,
+    "control_hz": table.CONTROL_HZ,
+    "contact_travel": table.CONTACT_TRAVEL,
+    "rolling_resistance": table.ROLLING_RESISTANCE,
 }

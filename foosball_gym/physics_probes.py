@@ -18,38 +18,38 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.policies.scripted import KICK_ANGLE, WIND_UP_ANGLE
 
 if TYPE_CHECKING:  # only for the hints: importing the simulator would import pybullet
     from foosball_gym.sim import TableSim
 
-R = T.BALL_RADIUS
+R = table.BALL_RADIUS
 # Where the ball's centre is when it touches a side wall.
-WALL_Y = T.BALL_LIMIT_Y
-KEEPER = T.rod("home_keeper")
+WALL_Y = table.BALL_LIMIT_Y
+KEEPER = table.rod("home_keeper")
 # What of a figurine the ball meets, from the rod's axis: the front face (towards +x at spin 0)
 # at the height of the ball's centre and the half width along y. The slim leg where the table
 # models one (its section from 0.017 m up); an older table's figurine is one box.
-if hasattr(T, "FIGURINE_LEG_SECTIONS"):
-    _LEG_FRONT = T.FIGURINE_LEG_SECTIONS[-1][2]
-    _LEG_HALF_WIDTH = T.FIGURINE_LEG_HALF_WIDTH
+if hasattr(table, "FIGURINE_LEG_SECTIONS"):
+    _LEG_FRONT = table.FIGURINE_LEG_SECTIONS[-1][2]
+    _LEG_HALF_WIDTH = table.FIGURINE_LEG_HALF_WIDTH
 else:
-    _LEG_FRONT = T.FIGURINE_SIZE[0] / 2
-    _LEG_HALF_WIDTH = T.FIGURINE_SIZE[1] / 2
+    _LEG_FRONT = table.FIGURINE_SIZE[0] / 2
+    _LEG_HALF_WIDTH = table.FIGURINE_SIZE[1] / 2
 # How far before the keeper's line a deflection probe's ball is served (m): about the distance
 # of the task's serves, so that it meets the foot turning as theirs do.
 DEFLECTION_RUN = 0.55
 # Beyond this spin (rad) the foot's sole is above a ball on the table.
-_FOOT_CLEARS_BALL = math.acos((T.ROD_HEIGHT - 2 * R) / T.FIGURINE_FOOT_BELOW_AXIS)
+_FOOT_CLEARS_BALL = math.acos((table.ROD_HEIGHT - 2 * R) / table.FIGURINE_FOOT_BELOW_AXIS)
 
 
 def _control_dt(sim: TableSim) -> float:
-    return getattr(sim, "control_dt", 1.0 / T.CONTROL_HZ)
+    return getattr(sim, "control_dt", 1.0 / table.CONTROL_HZ)
 
 
 def _base_dt(sim: TableSim) -> float:
-    return 1.0 / getattr(sim, "physics_hz", T.PHYSICS_HZ)
+    return 1.0 / getattr(sim, "physics_hz", table.PHYSICS_HZ)
 
 
 def wall_rebound(sim: TableSim, speed: float, angle_deg: float, phase: float) -> float:
@@ -136,7 +136,7 @@ def _figurine_overlap(x: float, y: float, z: float, slide: float, spin: float) -
     """
     if abs(y - slide) > _LEG_HALF_WIDTH or abs(spin) > _FOOT_CLEARS_BALL:
         return 0.0
-    face = KEEPER.x + (T.ROD_HEIGHT - z) * math.tan(spin) + _LEG_FRONT / math.cos(spin)
+    face = KEEPER.x + (table.ROD_HEIGHT - z) * math.tan(spin) + _LEG_FRONT / math.cos(spin)
     return max(face + R - x, 0.0)
 
 
@@ -147,8 +147,8 @@ def _post_overlap(x: float, y: float) -> float:
     corner at the mouth's edge is sharp. Overlap = R minus the distance from the ball's centre
     to that region, or R plus the depth when the centre is inside it.
     """
-    out_x = x + T.FIELD_HALF_LENGTH  # > 0: in front of the wall's face
-    out_y = T.GOAL_HALF_WIDTH - abs(y)  # > 0: over the mouth
+    out_x = x + table.FIELD_HALF_LENGTH  # > 0: in front of the wall's face
+    out_y = table.GOAL_HALF_WIDTH - abs(y)  # > 0: over the mouth
     if out_x <= 0 and out_y <= 0:
         return R + min(-out_x, -out_y)
     return max(R - math.hypot(max(out_x, 0.0), max(out_y, 0.0)), 0.0)
@@ -186,7 +186,7 @@ def tunnelling(sim: TableSim, speed: float, target: str) -> dict:
     elif target == "wall":
         runs = [((0.2, 0.0), (0.0, speed), 0.12)]
     elif target == "post":
-        y0 = T.GOAL_HALF_WIDTH + R / 2
+        y0 = table.GOAL_HALF_WIDTH + R / 2
         runs = [((0.2, s * y0), (-speed, 0.0), -s * KEEPER.slide_limit) for s in (1, -1)]
     else:
         raise ValueError(f"unknown target {target!r}; allowed: figurine, wall, post")
@@ -209,17 +209,17 @@ def tunnelling(sim: TableSim, speed: float, target: str) -> dict:
                 came_back |= vx > 0
                 clear = vx > 0 and x > KEEPER.x + _LEG_FRONT + R + 0.05
             elif target == "wall":
-                overlap = max(overlap, abs(y) + R - T.FIELD_HALF_WIDTH)
-                passed |= abs(y) > T.FIELD_HALF_WIDTH
+                overlap = max(overlap, abs(y) + R - table.FIELD_HALF_WIDTH)
+                passed |= abs(y) > table.FIELD_HALF_WIDTH
                 clear = ball.velocity[1] < 0 and y < WALL_Y - 0.05
             else:
                 overlap = max(overlap, _post_overlap(x, y))
-                passed |= x < -T.FIELD_HALF_LENGTH - R and abs(y) > T.GOAL_HALF_WIDTH
-                clear = vx > 0 and x > -T.FIELD_HALF_LENGTH + R + 0.05
-            if goal != T.NO_GOAL:
+                passed |= x < -table.FIELD_HALF_LENGTH - R and abs(y) > table.GOAL_HALF_WIDTH
+                clear = vx > 0 and x > -table.FIELD_HALF_LENGTH + R + 0.05
+            if goal != table.NO_GOAL:
                 # Only a goal at the home end is the ball getting through; a rebound may
                 # run the length of the table into the other one.
-                passed |= goal == T.AWAY_SCORED
+                passed |= goal == table.AWAY_SCORED
                 break
             if clear:
                 break
@@ -343,7 +343,7 @@ def rolling_distance(sim: TableSim, speed: float = 1.0) -> float:
     """
     sim.reset(slide=[-0.12], spin=[0.0], ball_position=(-0.56, 0.25), ball_velocity=(speed, 0.0))
     cdt = _control_dt(sim)
-    limit = T.FIELD_HALF_LENGTH - R - 0.002
+    limit = table.FIELD_HALF_LENGTH - R - 0.002
     samples = [(-0.56, speed)]  # (x, vx) at the end of each control step, launch first
     start = None
     hardest = 0.0
@@ -406,7 +406,7 @@ def volley(sim: TableSim, speed: float, angle_deg: float) -> dict:
             in_deg = math.degrees(math.atan2(bvy, -bvx))
         sim.command("position", [slide, KICK_ANGLE if swing else WIND_UP_ANGLE])
         goal, out = sim.step()
-        if goal != T.NO_GOAL or out:
+        if goal != table.NO_GOAL or out:
             return none
         x, y, bvx, bvy = now = sim.ball_xy()
         if left_at is None:
@@ -453,7 +453,7 @@ def swinging_foot(sim: TableSim, ball_speed: float) -> dict:
     sim.command("velocity", [0.0, 100 * math.pi])
     for _ in range(6):
         goal, out = sim.step()
-        if goal != T.NO_GOAL or out:
+        if goal != table.NO_GOAL or out:
             break
     x, _, vx, vy = sim.ball_xy()
     sim.command("position", [0.0, 0.0])
@@ -500,7 +500,7 @@ def deflection(sim: TableSim, speed: float, angle_deg: float, offset: float) -> 
     for k in range(round(2.0 / _control_dt(sim))):
         sim.command("position", [-offset, 0.0])
         goal, out = sim.step()
-        if goal != T.NO_GOAL or out:
+        if goal != table.NO_GOAL or out:
             return none
         x, _, bvx, bvy = sim.ball_xy()
         if left_at is None and bvx > 0 and x > KEEPER.x + 0.04:

@@ -1,4 +1,4 @@
-"""The Ullrich "Home" table of the paper as plain numbers (SPEC §1).
+"""The Ullrich "Home" table of the paper as plain numbers (docs/simulated-table.md).
 
 One source of truth for the URDF generator, the simulator, the environments, the scripted
 policies, the Kalman filter's walls and the hardware limits. Nothing here imports a simulator.
@@ -107,8 +107,8 @@ class Material:
     restitution: float
 
 
-# The materials bound to the colliders in the authors' model (SPEC §1). Their engine combines
-# two materials by averaging each coefficient; see :func:`combine`.
+# The materials bound to the colliders in the authors' model (docs/simulated-table.md). Their
+# engine combines two materials by averaging each coefficient; see :func:`combine`.
 BALL_MATERIAL = Material(0.2, 0.1, 0.5)
 TABLE_MATERIAL = Material(0.2, 0.1, 0.5)  # surface, walls, goal pockets
 FIGURINE_MATERIAL = Material(0.2, 0.2, 0.5)
@@ -164,8 +164,9 @@ AWAY_SCORED = -1
 PHYSICS_HZ = 240
 CONTROL_HZ = 60
 CONTACT_TRAVEL = 0.005
-# Relative speeds up to this (m/s; the fastest ball of SPEC §1) are resolved to CONTACT_TRAVEL;
-# beyond it (a foot swinging at full speed) a physics step's travel grows in proportion.
+# Relative speeds up to this (m/s; the fastest balls of real play) are resolved to
+# CONTACT_TRAVEL; beyond it (a foot swinging at full speed) a physics step's travel grows in
+# proportion.
 RESOLVED_SPEED = 20.0
 
 # Raised whenever a change to the simulated physics (contacts, shapes, materials, stepping) can

@@ -16,8 +16,7 @@ from multiprocessing import Pool
 
 import numpy as np
 
-from foosball_gym import physics_probes
-from foosball_gym import table as T
+from foosball_gym import physics_probes, table
 from foosball_gym.policies.deflection import ANGLES, OFFSETS, SPEEDS, TABLE_PATH
 
 _sim = None
@@ -45,7 +44,7 @@ def main() -> None:
     with Pool(args.processes) as pool:
         rows = pool.map(_row, jobs)
     out = np.array(rows, dtype=np.float32).reshape(len(SPEEDS), len(ANGLES), len(OFFSETS))
-    np.savez_compressed(TABLE_PATH, out_deg=out, physics_revision=T.PHYSICS_REVISION)
+    np.savez_compressed(TABLE_PATH, out_deg=out, physics_revision=table.PHYSICS_REVISION)
     print(f"wrote {TABLE_PATH}: {out.size} probes, {np.isnan(out).mean():.1%} without a clean exit")
 
 

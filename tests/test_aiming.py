@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.evaluation import evaluate
 from foosball_gym.policies.aiming import (
     MAX_ANGLE,
@@ -21,9 +21,9 @@ from foosball_gym.policies.aiming import (
 from foosball_gym.policies.scripted import KICK_ANGLE, WIND_UP_ANGLE, ScriptedTeam, slide_for
 from foosball_gym.registration import task_interface
 
-WALL = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
-KEEPER = T.rod("home_keeper")
-AWAY_KEEPER = T.rod("away_keeper")
+WALL = table.FIELD_HALF_WIDTH - table.BALL_RADIUS
+KEEPER = table.rod("home_keeper")
+AWAY_KEEPER = table.rod("away_keeper")
 
 
 def test_a_straight_path_keeps_its_y():
@@ -58,7 +58,7 @@ def test_the_plan_is_straight_when_the_lane_is_open_and_angled_around_a_blocker(
 def test_the_offset_grows_with_the_angle_and_keeps_its_sign():
     offsets = [offset_for_angle(math.radians(a)) for a in (10, 20, 30, 40, 50)]
     # Any angle needs the ball struck beside the leg's flat front, on a rounded end.
-    assert offsets == sorted(offsets) and offsets[0] > T.FIGURINE_LEG_FLAT_HALF_WIDTH
+    assert offsets == sorted(offsets) and offsets[0] > table.FIGURINE_LEG_FLAT_HALF_WIDTH
     assert offset_for_angle(math.radians(-30)) == -offset_for_angle(math.radians(30))
     assert offset_for_angle(0.0) == 0.0
 
@@ -71,7 +71,7 @@ def test_a_corner_kick_leaves_at_the_planned_angle(degrees):
     try:
         for spin, steps in ((WIND_UP_ANGLE, 25), (KICK_ANGLE, 6)):
             for _ in range(steps):
-                obs, *_ = env.step(np.array([slide, spin / T.SPIN_LIMIT], np.float32))
+                obs, *_ = env.step(np.array([slide, spin / table.SPIN_LIMIT], np.float32))
     finally:
         env.close()
     vx, vy = float(obs[6]), float(obs[7])
@@ -132,5 +132,5 @@ def test_a_deflecting_keeper_holds_its_feet_still_and_sends_the_ball_at_the_goal
         env.close()
     assert max(abs(s) for s in spins) < 0.05  # no swing: the ball bounced off a still foot
     x, y, vx, vy = (float(obs[names.index(n)]) for n in ("ball_x", "ball_y", "ball_vx", "ball_vy"))
-    at_goal_line = y + vy / vx * (T.GOAL_LINE_X - x)
-    assert vx > 0.5 and abs(at_goal_line) < T.GOAL_MOUTH_HALF, (x, y, vx, vy)
+    at_goal_line = y + vy / vx * (table.GOAL_LINE_X - x)
+    assert vx > 0.5 and abs(at_goal_line) < table.GOAL_MOUTH_HALF, (x, y, vx, vy)

@@ -11,7 +11,7 @@ import warnings
 import gymnasium as gym
 import pytest
 
-from foosball_gym import table as T
+from foosball_gym import table
 
 pytest.importorskip("stable_baselines3")
 
@@ -26,15 +26,16 @@ from foosball_gym.training.run_dir.physics import recorded_physics_revision  # n
 
 EPISODES = 100
 # Measured over 500 seeded episodes each shipped policy does at least as well as its baseline
-# (README); on 100 it may trail by a shot or two, which is not what this test is for: it catches
-# a broken policy.
+# (docs/results/index.md); on 100 it may trail by a shot or two, which is not what this test is for:
+# it catches a broken policy.
 MARGIN = 0.02
 # builtin:score-obstacles is level with its baseline (70.2 % against 68.6 % over 500 layouts)
 # and corner kicks make 100 seeds a noisy sample: on seeds 7000-7099 it scores 63 to 67.
 MARGINS = {"score-obstacles": 0.06}
 
 
-# What each shipped policy must keep on EPISODES seeded episodes (500 measured: README).
+# What each shipped policy must keep on EPISODES seeded episodes (500 measured:
+# docs/results/index.md).
 FLOORS = {"block": 0.98, "score-resting": 0.95, "score-obstacles": 0.6, "score-incoming": 0.9}
 
 
@@ -51,7 +52,7 @@ def _revision(name: str) -> int:
 @pytest.mark.parametrize("name", builtin_names())
 def test_a_shipped_policy_says_which_physics_it_was_trained_on(name):
     # One trained on other physics than the current may have lost its skill: loading it says so.
-    if _revision(name) == T.PHYSICS_REVISION:
+    if _revision(name) == table.PHYSICS_REVISION:
         with warnings.catch_warnings():
             warnings.simplefilter("error", PhysicsMismatchWarning)
             load_policy(f"builtin:{name}")

@@ -1,6 +1,7 @@
-"""Fast contacts keep their bounce and stop where they should (SPEC §1): rebounds at every
-speed, angle and moment of contact, no tunnelling at 20 m/s, kicks whose angle follows the
-offset, a ball that rolls a few metres, and no kick that throws the ball off the table.
+"""Fast contacts keep their bounce and stop where they should (docs/simulated-table.md):
+rebounds at every speed, angle and moment of contact, no tunnelling at 20 m/s, kicks whose
+angle follows the offset, a ball that rolls a few metres, and no kick that throws the ball off
+the table.
 
 ``benchmarks/physics_report.py`` prints the full grids; these are the cases the tests hold."""
 
@@ -11,8 +12,8 @@ import numpy as np
 import pytest
 
 from foosball_gym import physics_probes as probes
-from foosball_gym import table as T
 from foosball_gym.sim import TableSim
+from foosball_gym.table import BALL_RADIUS, BALL_TABLE_RESTITUTION, FIGURINE_FOOT_HEIGHT
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +28,7 @@ def sim():
 def test_a_side_wall_rebound_keeps_half_the_normal_speed(sim, speed, angle):
     for phase in (0.0, 0.3, 0.7):
         ratio = probes.wall_rebound(sim, speed, angle, phase)
-        assert ratio == pytest.approx(T.BALL_TABLE_RESTITUTION, abs=0.08), (phase, ratio)
+        assert ratio == pytest.approx(BALL_TABLE_RESTITUTION, abs=0.08), (phase, ratio)
 
 
 @pytest.mark.parametrize("target", ["figurine", "wall", "post"])
@@ -89,10 +90,10 @@ def scripted_games(env_id: str, seeds: range, **kwargs):
 def test_a_kick_keeps_the_ball_on_the_table(ball_start):
     highest = 0.0
     for seed, env, info in scripted_games("Foosball-Score-v0", range(15), ball_start=ball_start):
-        highest = max(highest, env.sim.ball_state().position[2] - T.BALL_RADIUS)
+        highest = max(highest, env.sim.ball_state().position[2] - BALL_RADIUS)
         assert not info["out_of_table"], seed
     # A kick may make the ball hop, never fly: its lowest point stays below the feet's soles.
-    assert highest < T.FIGURINE_FOOT_HEIGHT + 0.005
+    assert highest < FIGURINE_FOOT_HEIGHT + 0.005
 
 
 @pytest.mark.parametrize("speed", [2.0, 6.0, 10.0])
@@ -103,7 +104,7 @@ def test_a_shot_at_a_standing_keeper_stays_on_the_table(sim, speed):
             sim.command("position", [0.0, 0.0])
             _, out = sim.step()
             assert not out
-            assert sim.ball_state().position[2] - T.BALL_RADIUS < 0.005
+            assert sim.ball_state().position[2] - BALL_RADIUS < 0.005
 
 
 def test_fine_steps_are_taken_only_near_a_contact(sim):
@@ -194,9 +195,9 @@ def test_the_drives_never_outrun_the_speed_the_near_contact_test_assumes(monkeyp
 
 
 def test_scripted_full_games_keep_the_ball_on_the_table():
-    # What is left: a ball hopping off the surface and struck in the air by a swinging foot,
-    # about 4 in 100 scripted games on this physics, 22 in 100 before (README, the simulated
-    # table). Which seeds lose it moves with any change to the stepping, so this allows one.
+    # What is left: a ball hopping off the surface and struck in the air by a swinging foot, about 4
+    # in 100 scripted games on this physics, 22 in 100 before (docs/simulated-table.md). Which seeds
+    # lose it moves with any change to the stepping, so this allows one.
     lost = {
         seed
         for seed, _, info in scripted_games("Foosball-FullGame-v0", range(20))

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from foosball_gym import physics_probes
-from foosball_gym import table as T
 from foosball_gym.policies import deflection
 from foosball_gym.sim import TableSim
+from foosball_gym.table import PHYSICS_REVISION
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +23,7 @@ def sim():
 
 def test_the_shipped_table_was_measured_on_the_current_physics():
     # Otherwise: python scripts/deflection_table.py
-    assert deflection.table_revision() == T.PHYSICS_REVISION
+    assert deflection.table_revision() == PHYSICS_REVISION
 
 
 @pytest.mark.parametrize(("i", "j"), [(0, 4), (5, 12), (10, 24)])

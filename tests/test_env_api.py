@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
-from foosball_gym import ENV_IDS
-from foosball_gym import table as T
+from foosball_gym import ENV_IDS, table
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
@@ -112,9 +111,9 @@ def test_reset_options_place_the_ball_exactly(make_env):
     assert obs[2:4] == pytest.approx([0.35, 0.21], abs=1e-6)
     # A position alone is still a shot at the home goal.
     assert obs[4] < 0
-    x_goal = obs[2] + obs[4] * (-T.GOAL_LINE_X - obs[2]) / obs[4]
+    x_goal = obs[2] + obs[4] * (-table.GOAL_LINE_X - obs[2]) / obs[4]
     y_goal = obs[3] + obs[5] * (x_goal - obs[2]) / obs[4]
-    assert abs(y_goal) <= T.GOAL_HALF_WIDTH
+    assert abs(y_goal) <= table.GOAL_HALF_WIDTH
 
 
 @pytest.mark.parametrize(

@@ -10,8 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from foosball_gym import ENV_IDS
-from foosball_gym import table as T
+from foosball_gym import ENV_IDS, table
 from foosball_gym.envs.base import FoosballEnv
 from foosball_gym.envs.options import docstring_arguments
 from foosball_gym.registration import ENVS, env_class, make_task, task_interface
@@ -116,10 +115,10 @@ def test_options_every_environment_shares_default_alike():
     physics = {name: signatures[0][name].default for name in ("physics_hz", "control_hz")}
     physics |= {n: signatures[0][n].default for n in ("contact_travel", "rolling_resistance")}
     assert physics == {
-        "physics_hz": T.PHYSICS_HZ,
-        "control_hz": T.CONTROL_HZ,
-        "contact_travel": T.CONTACT_TRAVEL,
-        "rolling_resistance": T.ROLLING_RESISTANCE,
+        "physics_hz": table.PHYSICS_HZ,
+        "control_hz": table.CONTROL_HZ,
+        "contact_travel": table.CONTACT_TRAVEL,
+        "rolling_resistance": table.ROLLING_RESISTANCE,
     }
 
 

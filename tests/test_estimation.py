@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.camera import CameraModel
 from foosball_gym.estimation import BallFilter, RodFilter, TableStateEstimator, bounce
 from foosball_gym.registration import task_interface
@@ -42,7 +42,7 @@ def velocity_errors(shot, skip=4):
     errors = []
     for i, (t, xy, truth) in enumerate(shot):
         f.update(t, xy)
-        if i >= skip and abs(truth[0]) < T.FIELD_HALF_LENGTH - 0.05:
+        if i >= skip and abs(truth[0]) < table.FIELD_HALF_LENGTH - 0.05:
             errors.append(np.hypot(f.state[2] - truth[2], f.state[3] - truth[3]))
     return np.array(errors)
 
@@ -65,7 +65,7 @@ def test_velocity_through_a_wall_bounce_recovers_within_a_few_frames():
 
 
 def test_noisy_detections_through_a_bounce_give_the_velocity_and_stay_inside_the_walls():
-    wall = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
+    wall = table.FIELD_HALF_WIDTH - table.BALL_RADIUS
     rng = np.random.default_rng(4)
     f = BallFilter()
     x, y, vx, vy = 0.3, 0.1, -1.0, 5.0
@@ -147,7 +147,7 @@ def test_prediction_ahead_beats_the_raw_detection_at_30_ms():
 
 
 def test_the_prediction_bounces_off_the_walls():
-    wall = T.FIELD_HALF_WIDTH - T.BALL_RADIUS
+    wall = table.FIELD_HALF_WIDTH - table.BALL_RADIUS
     x, y, vx, vy = bounce(0.0, wall + 0.02, 0.0, 2.0, restitution=1.0)
     assert y == pytest.approx(wall - 0.02) and vy == -2.0
     x, y, vx, vy = bounce(0.0, wall + 0.02, 0.0, 2.0)

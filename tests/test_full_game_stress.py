@@ -5,13 +5,13 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 
 STEPS = 50_000
 # A figurine can squeeze the ball against a wall or the floor with its drive's full force, so
 # the ball may sink in by up to the travel the simulator allows per physics step near a contact
 # (9 mm seen); "outside" means its centre crossed the wall or the surface.
-SINK = 0.75 * T.BALL_RADIUS
+SINK = 0.75 * table.BALL_RADIUS
 
 
 def test_full_game_with_random_actions_keeps_the_ball_on_the_table():
@@ -27,12 +27,12 @@ def test_full_game_with_random_actions_keeps_the_ball_on_the_table():
             assert np.isfinite(obs).all() and np.isfinite(reward)
             x, y, z = sim.ball_state().position
             if not info["out_of_table"]:
-                assert z >= T.BALL_RADIUS - SINK, (x, y, z)
-                assert abs(y) <= T.FIELD_HALF_WIDTH - T.BALL_RADIUS + SINK, (x, y, z)
-                in_mouth = abs(y) <= T.GOAL_HALF_WIDTH
-                limit = T.POCKET_BACK_X if in_mouth else T.FIELD_HALF_LENGTH
-                assert abs(x) <= limit - T.BALL_RADIUS + SINK, (x, y, z)
-                if abs(x) > T.GOAL_LINE_X:
+                assert z >= table.BALL_RADIUS - SINK, (x, y, z)
+                assert abs(y) <= table.FIELD_HALF_WIDTH - table.BALL_RADIUS + SINK, (x, y, z)
+                in_mouth = abs(y) <= table.GOAL_HALF_WIDTH
+                limit = table.POCKET_BACK_X if in_mouth else table.FIELD_HALF_LENGTH
+                assert abs(x) <= limit - table.BALL_RADIUS + SINK, (x, y, z)
+                if abs(x) > table.GOAL_LINE_X:
                     assert info["goal"] != 0  # past the goal line only through the goal
             goals += info["goal"] != 0
             outs += info["out_of_table"]

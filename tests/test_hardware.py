@@ -15,7 +15,6 @@ import time
 import numpy as np
 import pytest
 
-from foosball_gym import table as T
 from foosball_gym.hardware import (
     BusConfig,
     ConfigError,
@@ -32,6 +31,7 @@ from foosball_gym.hardware.cia402.protocol import CW_QUICK_STOP, OPERATION_ENABL
 from foosball_gym.hardware.drives import TableDrives
 from foosball_gym.hardware.safety import JointLimits, TargetLimiter, Watchdog
 from foosball_gym.sim import TableSim
+from foosball_gym.table import SLIDE_MAX_SPEED, SPIN_LIMIT, SPIN_MAX_SPEED, rod
 from foosball_gym.virtual_table import SimulatedDrives
 
 SLIDE = ("home_keeper", "slide")
@@ -146,8 +146,8 @@ def test_shipped_keeper_table_has_the_papers_bus_and_nodes_and_the_tables_limits
     assert {j.key: j.node_id for j in config.joints} == {SLIDE: 1, SPIN: 2}
     assert config.mode == "csp" and config.control_hz == 60 and config.watchdog_s == 0.05
     slide, spin = config.joint(SLIDE), config.joint(SPIN)
-    assert slide.hard_limit == T.rod("home_keeper").slide_limit and spin.hard_limit == T.SPIN_LIMIT
-    assert slide.max_speed == T.SLIDE_MAX_SPEED and spin.max_speed == T.SPIN_MAX_SPEED
+    assert slide.hard_limit == rod("home_keeper").slide_limit and spin.hard_limit == SPIN_LIMIT
+    assert slide.max_speed == SLIDE_MAX_SPEED and spin.max_speed == SPIN_MAX_SPEED
 
 
 def test_config_save_and_load_round_trip(tmp_path):
@@ -337,7 +337,7 @@ def test_limits_and_speeds_hold_against_a_policy_of_extremes_and_noise(make_tabl
             )
         )
     joints, targets = np.array(joints), np.array(targets)
-    reach = np.array([T.rod("home_keeper").slide_limit - 0.005, T.SPIN_LIMIT - 0.1])
+    reach = np.array([rod("home_keeper").slide_limit - 0.005, SPIN_LIMIT - 0.1])
     speed = np.array([1.0, 30.0])
     increment = np.array([1e-5, 1e-3])
     assert (np.abs(targets) <= reach + increment).all()

@@ -13,7 +13,7 @@ from importlib.util import find_spec
 import numpy as np
 import pytest
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.cli import main
 from foosball_gym.play.human import (
     KICK_ANGLE,
@@ -59,10 +59,10 @@ def test_holding_up_and_down_slides_the_away_keeper_up_and_down_the_screen():
     assert screen_y(rod) == pytest.approx(3 * DT * SLIDE_SPEED)  # released: it stays
     for _ in range(60):
         rod.update(keys("s"), NONE)
-    assert rod.slide == pytest.approx(T.rod("away_keeper").slide_limit)  # down to the stop
+    assert rod.slide == pytest.approx(table.rod("away_keeper").slide_limit)  # down to the stop
     assert screen_y(rod) < 0
     rod.update(keys("up", "down"), NONE)
-    assert rod.slide == pytest.approx(T.rod("away_keeper").slide_limit)  # both: no move
+    assert rod.slide == pytest.approx(table.rod("away_keeper").slide_limit)  # both: no move
 
 
 def test_a_key_tapped_between_two_steps_moves_the_rod_for_one_step():
@@ -104,12 +104,12 @@ def test_the_person_drives_one_rod_and_the_opponent_policy_the_others():
 
     person = HumanOpponent(lambda: next(events), layout, "away_midfield", DT, others=team)
     action = person(np.zeros(36))
-    limit = T.rod("away_midfield").slide_limit
+    limit = table.rod("away_midfield").slide_limit
     # Away rods in the action: keeper, defense, midfield, offense; each slide then spin.
     np.testing.assert_allclose(action, [0.5, 0.5, 0.5, 0.5, -DT / limit, 0.0, 0.5, 0.5])
     action = person(np.ones(36))
     assert action[4] == pytest.approx(-2 * DT / limit)
-    assert action[5] == pytest.approx(KICK_ANGLE / T.SPIN_LIMIT)
+    assert action[5] == pytest.approx(KICK_ANGLE / table.SPIN_LIMIT)
     assert len(seen) == 2
 
 
@@ -121,7 +121,7 @@ def test_the_keeper_against_keeper_opponent_is_the_person_alone():
 
     person = HumanOpponent(lambda: (keys("down"), NONE), layout, "away_keeper", DT, no_one)
     action = person(np.zeros(10))
-    np.testing.assert_allclose(action, [DT / T.rod("away_keeper").slide_limit, 0.0])
+    np.testing.assert_allclose(action, [DT / table.rod("away_keeper").slide_limit, 0.0])
 
 
 def test_a_person_plays_an_away_rod_of_a_two_player_task_only():
@@ -376,7 +376,7 @@ def test_a_person_plays_the_away_keeper_in_the_window_with_real_key_events(
     records = log.read_text().splitlines()[1:]  # after the header
     # None where the camera saw no rod, or no new frame was due (after a serve).
     slides = [json.loads(line)["opponent_slides"].get("away_keeper") for line in records]
-    limit = T.rod("away_keeper").slide_limit
+    limit = table.rod("away_keeper").slide_limit
     (_, up_at), (_, up_end), (_, down_at), (_, down_end) = pressed
     assert len(slides) > down_end, len(slides)
 

@@ -16,7 +16,7 @@ pytest.importorskip("pettingzoo", reason="the multi-agent games need the 'distri
 
 from pettingzoo.test import parallel_api_test, parallel_seed_test  # noqa: E402
 
-from foosball_gym import table as T  # noqa: E402
+from foosball_gym import table  # noqa: E402
 from foosball_gym.envs.rewards import (  # noqa: E402
     TERMS,
     ball_to_goal_potential,
@@ -146,7 +146,7 @@ def test_each_side_gets_its_own_shaping_and_out_of_table_terms(env_id, make_game
     game = make_game(env_id, **SHAPED)
     u = game.single_agent_env
     layout = u.layout
-    away_rods = [T.rod(r) for r in layout.opponent]
+    away_rods = [table.rod(r) for r in layout.opponent]
     n_home = len(layout.controlled)
 
     def away_potentials():
@@ -189,7 +189,7 @@ def test_each_side_gets_its_own_shaping_and_out_of_table_terms(env_id, make_game
 def test_the_away_observation_is_the_home_one_seen_from_the_other_goal(env_id, make_game):
     game = make_game(env_id, opponent_prismatic_only=False)
     home_names = game.single_agent_env.obs_builder.names
-    swap = {T.HOME: T.AWAY, T.AWAY: T.HOME}
+    swap = {table.HOME: table.AWAY, table.AWAY: table.HOME}
     away_names = [
         n if n.startswith("ball_") else f"{swap[n.split('_', 1)[0]]}_{n.split('_', 1)[1]}"
         for n in home_names

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.sim import AWAY_SCORED, HOME_SCORED, NO_GOAL, TableSim
 
 
@@ -32,7 +32,7 @@ def run(sim: TableSim, steps: int, targets=None):
 
 def test_shot_into_the_empty_goal_is_a_goal(keeper_sim):
     keeper_sim.reset(
-        slide=[T.rod("home_keeper").slide_limit],
+        slide=[table.rod("home_keeper").slide_limit],
         ball_position=(0.0, -0.05),
         ball_velocity=(-5.0, 0.0),
     )
@@ -61,7 +61,7 @@ def test_shot_beside_the_goal_is_no_goal(keeper_sim):
         x, _, vx, _ = keeper_sim.ball_xy()
         xs.append(x)
         vxs.append(vx)
-    assert min(xs) >= -T.FIELD_HALF_LENGTH + T.BALL_RADIUS - 2e-3
+    assert min(xs) >= -table.FIELD_HALF_LENGTH + table.BALL_RADIUS - 2e-3
     assert vxs[-1] > 1.0  # bounced back off the end wall
 
 
@@ -71,7 +71,7 @@ def test_fast_shot_at_the_keeper_is_blocked(keeper_sim, speed):
     goal, out, _ = run(keeper_sim, 90)
     assert goal != AWAY_SCORED and not out
     x, _, _, _ = keeper_sim.ball_xy()
-    assert x > T.rod("home_keeper").x
+    assert x > table.rod("home_keeper").x
 
 
 @pytest.mark.parametrize("speed", [10.0, 15.0])
@@ -106,8 +106,8 @@ def test_ball_bounces_off_a_side_wall_and_stays_on_the_table(keeper_sim, speed):
         z = keeper_sim.ball_state().position[2]
         # A ball overlaps a wall by at most the travel allowed per physics step near a wall,
         # twice that near a figurine.
-        assert abs(y) <= T.FIELD_HALF_WIDTH - T.BALL_RADIUS + 2 * T.CONTACT_TRAVEL
-        assert -1e-3 <= z <= T.OUT_OF_TABLE_HEIGHT
+        assert abs(y) <= table.FIELD_HALF_WIDTH - table.BALL_RADIUS + 2 * table.CONTACT_TRAVEL
+        assert -1e-3 <= z <= table.OUT_OF_TABLE_HEIGHT
     assert max(ys) > 0.30  # it reached the wall ...
     assert ys[-1] < max(ys)  # ... and came back
 
@@ -118,7 +118,7 @@ def test_fast_ball_at_the_end_wall_beside_the_goal_stays_on_the_table(keeper_sim
         goal, out = keeper_sim.step()
         assert goal == NO_GOAL and not out
         x, y, _, _ = keeper_sim.ball_xy()
-        assert abs(x) <= T.FIELD_HALF_LENGTH
+        assert abs(x) <= table.FIELD_HALF_LENGTH
 
 
 def test_ball_thrown_upwards_is_out_of_table(keeper_sim):
@@ -160,7 +160,7 @@ def test_keeper_reaches_its_target_within_the_drive_limits(keeper_sim):
         positions.append(pos[0])
         speeds.append(abs(vel[0]))
     assert abs(positions[-1] - target) < 1e-3
-    assert max(speeds) <= T.SLIDE_MAX_SPEED + 1e-6
+    assert max(speeds) <= table.SLIDE_MAX_SPEED + 1e-6
     assert max(positions) < target + 2e-3  # no overshoot worth the name
     reached = next(i for i, p in enumerate(positions) if abs(p - target) < 2e-3)
     # 0.1 m at up to 4 m/s with 70 N: about a tenth of a second.
@@ -173,8 +173,8 @@ def test_position_targets_are_clamped_to_the_joint_limits(keeper_sim):
         keeper_sim.command("position", [1.0, 100.0])
         keeper_sim.step()
     pos, _ = keeper_sim.joint_states()
-    assert pos[0] == pytest.approx(T.rod("home_keeper").slide_limit, abs=1e-3)
-    assert pos[1] == pytest.approx(T.SPIN_LIMIT, abs=0.02)
+    assert pos[0] == pytest.approx(table.rod("home_keeper").slide_limit, abs=1e-3)
+    assert pos[1] == pytest.approx(table.SPIN_LIMIT, abs=0.02)
 
 
 def test_velocity_control_moves_at_the_commanded_speed_up_to_the_drive_limit(keeper_sim):
@@ -189,7 +189,7 @@ def test_velocity_control_moves_at_the_commanded_speed_up_to_the_drive_limit(kee
     keeper_sim.command("velocity", [50.0, 0.0])
     keeper_sim.step()
     _, vel = keeper_sim.joint_states()
-    assert 0 < vel[0] <= T.SLIDE_MAX_SPEED + 1e-6
+    assert 0 < vel[0] <= table.SLIDE_MAX_SPEED + 1e-6
 
 
 def test_torque_control_spins_the_rod_the_right_way(keeper_sim):
@@ -200,7 +200,7 @@ def test_torque_control_spins_the_rod_the_right_way(keeper_sim):
     assert pos[1] > 0 and vel[1] > 0
     # Positive spin swings the home keeper's foot towards +x, the goal it attacks.
     foot_x = keeper_sim.figurine_positions()[0, 0]
-    assert foot_x > T.rod("home_keeper").x
+    assert foot_x > table.rod("home_keeper").x
 
 
 @pytest.mark.parametrize("spell", ["velocity", "torque"])
@@ -209,7 +209,7 @@ def test_a_position_drive_keeps_its_top_speed_after_a_spell_of_other_control(spe
     # for torque control used to be). The ball waits 3 mm in front of the keeper's foot,
     # within its reach but not in its way, so Bullet moves the keeper throughout.
     sim = TableSim(["home_keeper"])
-    keeper = T.rod("home_keeper")
+    keeper = table.rod("home_keeper")
     try:
         sim.reset(ball_position=(keeper.x + 0.025, 0.0))
         sim.command(spell, [0.0, 0.0])
@@ -226,17 +226,17 @@ def test_a_position_drive_keeps_its_top_speed_after_a_spell_of_other_control(spe
     finally:
         sim.close()
     assert in_bullet >= 20
-    assert T.SLIDE_MAX_SPEED * 0.9 < peak <= T.SLIDE_MAX_SPEED * (1 + 1e-9)
+    assert table.SLIDE_MAX_SPEED * 0.9 < peak <= table.SLIDE_MAX_SPEED * (1 + 1e-9)
 
 
 def test_a_velocity_drive_gets_no_more_torque_in_fine_steps():
     # Bullet caps a motor's impulse per step at its force times the step size at the time of
     # the command; the ball beside the foot (never touched) sets the steps as the rod spins.
     sim = TableSim(["home_keeper"])
-    keeper = T.rod("home_keeper")
+    keeper = table.rod("home_keeper")
     try:
         sim.reset(ball_position=(keeper.x, 0.035))
-        sim.command("velocity", [0.0, T.SPIN_MAX_SPEED])
+        sim.command("velocity", [0.0, table.SPIN_MAX_SPEED])
         speeds, steps = [], []
         for _ in range(3):
             before = sim.physics_steps
@@ -244,7 +244,7 @@ def test_a_velocity_drive_gets_no_more_torque_in_fine_steps():
             sim.step()
             steps.append(sim.physics_steps - before)
             speeds.append(sim.joint_states()[1][1])
-        gain = T.SPIN_MAX_TORQUE / sim._drives.mass[1] * sim.control_dt
+        gain = table.SPIN_MAX_TORQUE / sim._drives.mass[1] * sim.control_dt
     finally:
         sim.close()
     assert len(set(steps)) > 1 and max(steps) > 2 * sim.substeps

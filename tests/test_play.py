@@ -145,7 +145,8 @@ def test_the_stack_plays_on_the_table_in_real_time():
     )
     assert report.episodes == 3 and report.steps > 0
     assert np.median(report.ball_error_mm) < 3.0
-    # Periods are what the wall clock gave: measured, not asserted (benchmarks and README).
+    # Periods are what the wall clock gave: measured, not asserted (benchmarks and
+    # docs/real-table.md).
     assert len(report.period_ms) == report.steps - 1
 
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.sim import TableSim
 from foosball_gym.sim.drives import RodDrives
 
@@ -87,7 +87,7 @@ def test_bad_drive_model_settings_are_refused():
             lower=[-1.0, -1.0],
             upper=[1.0, 1.0],
             gains=[1.0],
-            erp_rate=T.PHYSICS_HZ * 0.01,
+            erp_rate=table.PHYSICS_HZ * 0.01,
         )
     drives = RodDrives(
         mass=[1.0],

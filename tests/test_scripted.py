@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.policies.scripted import ScriptedKeeper, crossing_y
 
 
@@ -39,7 +39,7 @@ def test_scripted_keeper_blocks_the_wide_distribution():
     wide = {
         "speed_range": (2.0, 10.0),
         "serve_x_range": (-0.1, 0.45),
-        "serve_y_range": (-T.BALL_LIMIT_Y, T.BALL_LIMIT_Y),
+        "serve_y_range": (-table.BALL_LIMIT_Y, table.BALL_LIMIT_Y),
         "bank_share": 0.5,
     }
     env = gym.make("Foosball-Block-v0", **wide)
@@ -57,7 +57,7 @@ def test_wall_bounce_prediction():
     assert crossing_y(0.3, 0.1, -2.0, 0.2, -0.522) == pytest.approx(0.1 + 0.1 * 0.822)
     # From (0.3, 0) at 45 degrees towards -x and +y: meets the wall, and comes back along a
     # path flattened as the simulated wall flattens it (0.595 at 45 degrees).
-    ratio = T.wall_bounce_slope_ratio(1.0)
+    ratio = table.wall_bounce_slope_ratio(1.0)
     assert ratio == pytest.approx(0.595)
     assert crossing_y(0.3, 0.0, -1.0, 1.0, -0.522) == pytest.approx(wall - ratio * (0.822 - wall))
     assert crossing_y(0.3, 0.0, -1.0, -1.0, -0.522) == pytest.approx(-wall + ratio * (0.822 - wall))
@@ -87,7 +87,7 @@ def test_scripted_keeper_scores_from_rest_in_most_episodes():
 
 
 def test_scripted_team_lifts_its_feet_for_its_own_shots_and_shoots_a_ball_in_reach():
-    from foosball_gym import table as T
+    from foosball_gym import table
     from foosball_gym.policies.scripted import KICK_ANGLE, WIND_UP_ANGLE, ScriptedTeam
 
     names = [
@@ -99,15 +99,15 @@ def test_scripted_team_lifts_its_feet_for_its_own_shots_and_shoots_a_ball_in_rea
         "ball_vy",
     ]
     team = ScriptedTeam(names, ("home_defense",), "both")
-    rod = T.rod("home_defense")
+    rod = table.rod("home_defense")
     # Ball behind the rod, rolling forward: feet up.
     a = team(np.array([0.0, 0.0, rod.x - 0.1, 0.0, 2.0, 0.0], np.float32))
-    assert a[1] * T.SPIN_LIMIT == pytest.approx(WIND_UP_ANGLE)
+    assert a[1] * table.SPIN_LIMIT == pytest.approx(WIND_UP_ANGLE)
     # Ball still, 5 cm in front, figurine lined up, feet down: swing.
     y = rod.figurine_offsets[0]
     a = team(np.array([0.0, 0.0, rod.x + 0.05, y, 0.0, 0.0], np.float32))
-    assert a[1] * T.SPIN_LIMIT == pytest.approx(KICK_ANGLE)
+    assert a[1] * table.SPIN_LIMIT == pytest.approx(KICK_ANGLE)
     # Same ball, figurine not lined up: wind up while sliding over.
     a = team(np.array([0.05, 0.0, rod.x + 0.05, y, 0.0, 0.0], np.float32))
-    assert a[1] * T.SPIN_LIMIT == pytest.approx(WIND_UP_ANGLE)
+    assert a[1] * table.SPIN_LIMIT == pytest.approx(WIND_UP_ANGLE)
     assert a[0] * rod.slide_limit == pytest.approx(0.0, abs=1e-6)

@@ -1,4 +1,5 @@
-"""The self-play replacement rule (SPEC §4) and the learner's rating, without a learner."""
+"""The self-play replacement rule (the paper's rule, docs/self-play.md) and the learner's
+rating, without a learner."""
 
 from __future__ import annotations
 

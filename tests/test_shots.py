@@ -9,14 +9,14 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.sim import AWAY_SCORED, TableSim
 from foosball_gym.tasks.serves import Shots
 
 WIDE = {
     "speed_range": (2.0, 10.0),
     "serve_x_range": (-0.1, 0.45),
-    "serve_y_range": (-T.BALL_LIMIT_Y, T.BALL_LIMIT_Y),
+    "serve_y_range": (-table.BALL_LIMIT_Y, table.BALL_LIMIT_Y),
     "bank_share": 0.5,
 }
 # The foot's sole is above a ball on the table at this spin: the keeper is out of the way.
@@ -35,8 +35,8 @@ def first_wall_contact(position, velocity) -> float | None:
     (x, y), (vx, vy) = position, velocity
     if vy == 0:
         return None
-    to_wall = (math.copysign(T.BALL_LIMIT_Y, vy) - y) / vy
-    to_line = (-T.GOAL_LINE_X - x) / vx
+    to_wall = (math.copysign(table.BALL_LIMIT_Y, vy) - y) / vy
+    to_line = (-table.GOAL_LINE_X - x) / vx
     return to_wall if to_wall < to_line else None
 
 
@@ -47,8 +47,11 @@ def test_shots_without_banks_draw_what_the_plain_serve_drew():
     for _ in range(50):
         position, velocity = plain.start(a)
         x, y = b.uniform(0.0, 0.4), b.uniform(-0.3, 0.3)
-        target, speed = b.uniform(-T.GOAL_MOUTH_HALF, T.GOAL_MOUTH_HALF), b.uniform(2.0, 7.0)
-        dx, dy = -T.GOAL_LINE_X - x, target - y
+        target, speed = (
+            b.uniform(-table.GOAL_MOUTH_HALF, table.GOAL_MOUTH_HALF),
+            b.uniform(2.0, 7.0),
+        )
+        dx, dy = -table.GOAL_LINE_X - x, target - y
         norm = math.hypot(dx, dy)
         assert position == (x, y)
         assert velocity == pytest.approx((speed * dx / norm, speed * dy / norm))
@@ -74,7 +77,7 @@ def test_away_goal_shots_are_the_home_ones_mirrored():
     home, away = wide_shots(1.0), wide_shots(1.0)
     a, b = np.random.default_rng(5), np.random.default_rng(5)
     for _ in range(20):
-        (p, v), (q, w) = home.start(a), away.start(b, T.AWAY)
+        (p, v), (q, w) = home.start(a), away.start(b, table.AWAY)
         assert q == pytest.approx((-p[0], -p[1]))
         assert w == pytest.approx((-v[0], -v[1]))
 

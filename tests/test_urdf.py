@@ -13,15 +13,15 @@ import numpy as np
 import pytest
 import yourdfpy
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.sim import TableSim
 from foosball_gym.sim.urdf import urdf_path
 
 ROOT = Path(__file__).resolve().parents[1]
 URDF_DIR = ROOT / "urdf"
 
-# SPEC §1, written out again on purpose: a change to table.py must be a change to this too.
-SPEC_RODS = {
+# The paper's rods, written out again on purpose: a change to table.py must be a change to this too.
+PAPER_RODS = {
     "home_keeper": (-0.52200, 1, 0.1230),
     "home_defense": (-0.37295, 2, 0.1790),
     "away_offense": (-0.22372, 3, 0.1185),
@@ -41,7 +41,7 @@ def urdf() -> yourdfpy.URDF:
 def test_urdf_has_two_joints_per_rod_with_spec_limits(urdf):
     movable = {n: j for n, j in urdf.joint_map.items() if j.type != "fixed"}
     assert len(movable) == 16
-    for name, (x, _, slide_limit) in SPEC_RODS.items():
+    for name, (x, _, slide_limit) in PAPER_RODS.items():
         slide, spin = movable[f"{name}_slide"], movable[f"{name}_spin"]
         assert slide.type == "prismatic" and spin.type == "revolute"
         assert slide.limit.lower == pytest.approx(-slide_limit)
@@ -59,11 +59,11 @@ def test_urdf_has_two_joints_per_rod_with_spec_limits(urdf):
 def test_urdf_has_22_figurines_at_spec_offsets(urdf):
     figurines = [n for n in urdf.link_map if "_figurine_" in n]
     assert len(figurines) == 22
-    for name, (_, count, _) in SPEC_RODS.items():
+    for name, (_, count, _) in PAPER_RODS.items():
         mounts = [j for n, j in urdf.joint_map.items() if n.startswith(f"{name}_figurine_")]
         assert len(mounts) == count
         offsets = sorted(round(j.origin[1, 3], 4) for j in mounts)
-        assert offsets == sorted(round(o, 4) for o in T.rod(name).figurine_offsets)
+        assert offsets == sorted(round(o, 4) for o in table.rod(name).figurine_offsets)
         for j in mounts:
             # The full 30 x 34 mm body from 0.040 m above the surface to the head, 0.040 m
             # above the axis; below it the slim leg down to the foot, 0.011 m above the surface.
@@ -107,7 +107,7 @@ def test_the_leg_has_the_cad_figurines_cross_sections():
 
 
 def test_away_rods_are_turned_half_a_turn(urdf):
-    for name in SPEC_RODS:
+    for name in PAPER_RODS:
         yaw_cos = urdf.joint_map[f"{name}_slide"].origin[0, 0]
         assert yaw_cos == pytest.approx(1.0 if name.startswith("home") else -1.0)
 
@@ -122,7 +122,7 @@ def test_committed_urdf_is_what_the_generator_writes():
 
 
 def test_urdf_loads_in_pybullet_with_every_rod():
-    sim = TableSim([r.name for r in T.RODS])
+    sim = TableSim([r.name for r in table.RODS])
     try:
         view = sim._view_world()  # the whole table, as it is drawn
         assert view.client.getNumJoints(view.body) == 16  # figurines merged into their rods

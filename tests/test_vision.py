@@ -6,9 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from foosball_gym import table as T
 from foosball_gym.camera import CameraModel
 from foosball_gym.sim import TableSim
+from foosball_gym.table import BALL_RADIUS, RODS, rod
 from foosball_gym.vision import (
     FIELD_MARKERS,
     CallableSource,
@@ -47,7 +47,7 @@ def bgr(sim: TableSim) -> np.ndarray:
 
 def test_the_calibration_of_the_simulated_camera_matches_its_renders(camera):
     model, calibration = camera
-    points = np.array([[0.3, 0.2, 0.0], [-0.5, -0.3, 0.05], [0.0, 0.0, T.BALL_RADIUS]])
+    points = np.array([[0.3, 0.2, 0.0], [-0.5, -0.3, 0.05], [0.0, 0.0, BALL_RADIUS]])
     np.testing.assert_allclose(calibration.project(points), model.project(points), atol=1e-9)
     back = calibration.pixel_to_table(model.project(points), z=0.05)
     np.testing.assert_allclose(back[1], points[1, :2], atol=1e-9)
@@ -90,12 +90,12 @@ def test_no_ball_no_detection(sim):
 
 def rod_errors(sim, calibration, spin: float, seed: int, frames: int = 12) -> np.ndarray:
     """Slide errors (mm) of the tracked opponent rods at random slides and spins."""
-    tracker = RodTracker(calibration, [T.rod(n) for n in OPPONENT])
+    tracker = RodTracker(calibration, [rod(n) for n in OPPONENT])
     rng = np.random.default_rng(seed)
     errors = []
     for _ in range(frames):
         rods = ["home_keeper", *OPPONENT]
-        slides = [rng.uniform(-1, 1) * T.rod(n).slide_limit for n in rods]
+        slides = [rng.uniform(-1, 1) * rod(n).slide_limit for n in rods]
         spins = list(rng.uniform(-spin, spin, len(rods)))
         sim.reset(slide=slides, spin=spins, ball_position=(0.0, 0.0))
         seen = tracker(bgr(sim))
@@ -121,12 +121,12 @@ def test_spun_rods_are_found_within_8_mm(sim, camera):
 
 
 def test_a_rod_with_a_hidden_figurine_is_still_placed():
-    rod = T.rod("away_offense")
-    ys = rod.figurine_y(0.05)
-    assert fit_slide(rod, [ys[0], ys[2]]) == pytest.approx(0.05, abs=1e-9)
-    assert fit_slide(rod, [ys[1]]) is not None
+    offense = rod("away_offense")
+    ys = offense.figurine_y(0.05)
+    assert fit_slide(offense, [ys[0], ys[2]]) == pytest.approx(0.05, abs=1e-9)
+    assert fit_slide(offense, [ys[1]]) is not None
     # One figurine of the defense alone fits two rod positions; the last known one decides.
-    defense = T.rod("away_defense")
+    defense = rod("away_defense")
     seen = [defense.figurine_y(0.1)[0]]
     assert fit_slide(defense, seen, prior=0.05) == pytest.approx(0.1, abs=1e-9)
     assert fit_slide(defense, seen, prior=-0.15) == pytest.approx(0.1 - 0.247, abs=1e-9)
@@ -140,7 +140,7 @@ def test_the_camera_pose_is_recovered_from_the_field_corners(sim, camera):
     np.testing.assert_allclose(corners, calibration.project(FIELD_MARKERS), atol=1.0)
     recovered = calibrate_from_frame(frame, model.intrinsics(), np.zeros(5))
     points = np.array([[0.3, 0.2], [-0.5, -0.3], [0.55, 0.3], [0.0, 0.0]])
-    uv = calibration.project(np.column_stack([points, np.full(4, T.BALL_RADIUS)]))
+    uv = calibration.project(np.column_stack([points, np.full(4, BALL_RADIUS)]))
     assert np.abs(recovered.pixel_to_table(uv) - points).max() < 0.002
     assert CameraCalibration.from_dict(recovered.to_dict()).to_dict() == recovered.to_dict()
 
@@ -218,7 +218,7 @@ def test_a_missing_onnx_model_is_a_clear_error(tmp_path):
         OnnxBallDetector(bad)
 
 
-@pytest.mark.parametrize("rods", [["home_keeper"], [r.name for r in T.RODS]])
+@pytest.mark.parametrize("rods", [["home_keeper"], [r.name for r in RODS]])
 def test_layered_frames_are_the_frames_of_the_whole_scene_pixel_for_pixel(rods):
     """``render`` lays the rods and the ball over a once-drawn picture of the field and
     walls, by depth: it must show exactly what drawing everything at once shows."""
@@ -230,7 +230,7 @@ def test_layered_frames_are_the_frames_of_the_whole_scene_pixel_for_pixel(rods):
             for _ in range(4):
                 slides = [rng.uniform(-r.slide_limit, r.slide_limit) for r in sim.rods]
                 spins = list(rng.uniform(-1.5, 1.5, n))
-                ball = [rng.uniform(-0.58, 0.58), rng.uniform(-0.32, 0.32), T.BALL_RADIUS]
+                ball = [rng.uniform(-0.58, 0.58), rng.uniform(-0.32, 0.32), BALL_RADIUS]
                 sim.show(slides + spins, ball)
                 layered = sim.render(*size)
                 whole = sim.render(*size, layered=False)

@@ -15,7 +15,7 @@ import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from foosball_gym import table as T
+from foosball_gym import table
 
 HERE = Path(__file__).resolve().parent
 TABLE_FILE = "foosball_table.urdf"
@@ -86,17 +86,17 @@ def _table_link(robot: ET.Element) -> None:
     """Surface, side walls, end walls with the goal openings, and a goal pocket behind each."""
     link = ET.SubElement(robot, "link", name="table")
     _inertial(link, 0.0, 0.0, 0.0, 0.0)
-    lx, ly, h = T.FIELD_HALF_LENGTH, T.FIELD_HALF_WIDTH, T.WALL_HEIGHT
-    w, s = T.WALL_THICKNESS, T.SURFACE_THICKNESS
-    gw, gh = T.GOAL_HALF_WIDTH, T.GOAL_HEIGHT
-    end_out = lx + T.END_WALL_THICKNESS
-    back = T.POCKET_BACK_X
+    lx, ly, h = table.FIELD_HALF_LENGTH, table.FIELD_HALF_WIDTH, table.WALL_HEIGHT
+    w, s = table.WALL_THICKNESS, table.SURFACE_THICKNESS
+    gw, gh = table.GOAL_HALF_WIDTH, table.GOAL_HEIGHT
+    end_out = lx + table.END_WALL_THICKNESS
+    back = table.POCKET_BACK_X
     outer_x = back + w
     _box(link, (-lx, -ly, -s), (lx, ly, 0.0), "field", "surface")
     for side, sign in (("left", 1.0), ("right", -1.0)):
         y0, y1 = sorted((sign * ly, sign * (ly + w)))
         _box(link, (-outer_x, y0, -s), (outer_x, y1, h), "wall", f"{side}_side_wall")
-    for team, sign in ((T.HOME, -1.0), (T.AWAY, 1.0)):
+    for team, sign in ((table.HOME, -1.0), (table.AWAY, 1.0)):
         x0, x1 = sorted((sign * lx, sign * end_out))
         for side, ysign in (("left", 1.0), ("right", -1.0)):
             y0, y1 = sorted((ysign * gw, ysign * ly))
@@ -114,30 +114,30 @@ def _table_link(robot: ET.Element) -> None:
         _box(link, (bx0, -gw - w, -s), (bx1, gw + w, gh + w), "pocket", f"{team}_pocket_back")
 
 
-def _rod(robot: ET.Element, rod: T.Rod) -> None:
-    yaw = 0.0 if rod.team == T.HOME else math.pi
+def _rod(robot: ET.Element, rod: table.Rod) -> None:
+    yaw = 0.0 if rod.team == table.HOME else math.pi
     carriage = f"{rod.name}_carriage"
     body = f"{rod.name}_rod"
 
     link = ET.SubElement(robot, "link", name=carriage)
-    _inertial(link, T.CARRIAGE_MASS, 1e-4, 1e-4, 1e-4)
+    _inertial(link, table.CARRIAGE_MASS, 1e-4, 1e-4, 1e-4)
 
     joint = ET.SubElement(robot, "joint", name=rod.slide_joint, type="prismatic")
     ET.SubElement(joint, "parent", link="table")
     ET.SubElement(joint, "child", link=carriage)
-    ET.SubElement(joint, "origin", xyz=_fmt(rod.x, 0.0, T.ROD_HEIGHT), rpy=_fmt(0.0, 0.0, yaw))
+    ET.SubElement(joint, "origin", xyz=_fmt(rod.x, 0.0, table.ROD_HEIGHT), rpy=_fmt(0.0, 0.0, yaw))
     ET.SubElement(joint, "axis", xyz="0 1 0")
     ET.SubElement(
         joint,
         "limit",
         lower=_fmt(-rod.slide_limit),
         upper=_fmt(rod.slide_limit),
-        effort=_fmt(T.SLIDE_MAX_FORCE),
-        velocity=_fmt(T.SLIDE_MAX_SPEED),
+        effort=_fmt(table.SLIDE_MAX_FORCE),
+        velocity=_fmt(table.SLIDE_MAX_SPEED),
     )
 
     link = ET.SubElement(robot, "link", name=body)
-    m, r, length = T.ROD_MASS, T.ROD_RADIUS, T.ROD_LENGTH
+    m, r, length = table.ROD_MASS, table.ROD_RADIUS, table.ROD_LENGTH
     across = m * (3 * r * r + length * length) / 12
     _inertial(link, m, across, m * r * r / 2, across)
     visual = ET.SubElement(link, "visual", name=f"{rod.name}_bar")
@@ -157,17 +157,17 @@ def _rod(robot: ET.Element, rod: T.Rod) -> None:
     ET.SubElement(
         joint,
         "limit",
-        lower=_fmt(-T.SPIN_LIMIT),
-        upper=_fmt(T.SPIN_LIMIT),
-        effort=_fmt(T.SPIN_MAX_TORQUE),
-        velocity=_fmt(T.SPIN_MAX_SPEED),
+        lower=_fmt(-table.SPIN_LIMIT),
+        upper=_fmt(table.SPIN_LIMIT),
+        effort=_fmt(table.SPIN_MAX_TORQUE),
+        velocity=_fmt(table.SPIN_MAX_SPEED),
     )
 
-    fx, fy, fz = T.FIGURINE_SIZE
-    fm = T.FIGURINE_MASS
+    fx, fy, fz = table.FIGURINE_SIZE
+    fm = table.FIGURINE_MASS
     # Heights above the surface -> the figurine link's frame (its origin is the box centre).
-    centre = T.ROD_HEIGHT - T.FIGURINE_CENTRE_BELOW_AXIS
-    body_lo = (-fx / 2, -fy / 2, T.FIGURINE_LEG_TOP - centre)
+    centre = table.ROD_HEIGHT - table.FIGURINE_CENTRE_BELOW_AXIS
+    body_lo = (-fx / 2, -fy / 2, table.FIGURINE_LEG_TOP - centre)
     for i, offset in enumerate(rod.figurine_offsets):
         name = f"{rod.name}_figurine_{i}"
         link = ET.SubElement(robot, "link", name=name)
@@ -184,7 +184,7 @@ def _rod(robot: ET.Element, rod: T.Rod) -> None:
         ET.SubElement(joint, "parent", link=body)
         ET.SubElement(joint, "child", link=name)
         ET.SubElement(
-            joint, "origin", xyz=_fmt(0.0, offset, -T.FIGURINE_CENTRE_BELOW_AXIS), rpy="0 0 0"
+            joint, "origin", xyz=_fmt(0.0, offset, -table.FIGURINE_CENTRE_BELOW_AXIS), rpy="0 0 0"
         )
 
 
@@ -203,7 +203,7 @@ def _mesh(
 def leg_section(x0: float, x1: float) -> list[tuple[float, float]]:
     """A leg cross-section at one height: full thickness ``x0..x1`` out to the flat half
     width, then rounded ends narrowing to a point at the full half width (counter-clockwise)."""
-    flat, half = T.FIGURINE_LEG_FLAT_HALF_WIDTH, T.FIGURINE_LEG_HALF_WIDTH
+    flat, half = table.FIGURINE_LEG_FLAT_HALF_WIDTH, table.FIGURINE_LEG_HALF_WIDTH
     mid, hx = (x0 + x1) / 2, (x1 - x0) / 2
     points = []
     for sign in (1.0, -1.0):
@@ -220,7 +220,7 @@ def leg_section(x0: float, x1: float) -> list[tuple[float, float]]:
 
 def leg_obj() -> str:
     """The leg as a closed mesh: its cross-sections at the heights of ``table.py``, joined."""
-    rings = [[(x, y, h) for x, y in leg_section(x0, x1)] for h, x0, x1 in T.FIGURINE_LEG_HULL]
+    rings = [[(x, y, h) for x, y in leg_section(x0, x1)] for h, x0, x1 in table.FIGURINE_LEG_HULL]
     n = len(rings[0])
     lines = ["# Generated by urdf/generate.py from foosball_gym/table.py; do not edit."]
     lines += [f"v {_fmt(*v)}" for ring in rings for v in ring]
@@ -241,7 +241,7 @@ def table_urdf() -> str:
     robot = ET.Element("robot", name="foosball_table")
     _materials(robot)
     _table_link(robot)
-    for rod in T.RODS:
+    for rod in table.RODS:
         _rod(robot, rod)
     return _serialise(robot)
 
@@ -251,7 +251,7 @@ def ball_urdf() -> str:
     mat = ET.SubElement(robot, "material", name="ball")
     ET.SubElement(mat, "color", rgba=_fmt(*COLOURS["ball"]))
     link = ET.SubElement(robot, "link", name="ball")
-    m, r = T.BALL_MASS, T.BALL_RADIUS
+    m, r = table.BALL_MASS, table.BALL_RADIUS
     i = 2 * m * r * r / 5
     _inertial(link, m, i, i, i)
     for tag in ("visual", "collision"):

@@ -16,7 +16,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.envs import options as env_options
 from foosball_gym.envs.estimated import CameraNoise, EstimatedState
 from foosball_gym.envs.options import RENDER_MODES
@@ -117,7 +117,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
       1 m/s stops after about 5 m), within [0, 0.5].
     """
 
-    metadata = {"render_modes": list(RENDER_MODES), "render_fps": T.CONTROL_HZ}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": table.CONTROL_HZ}
 
     def __new__(cls, *args: Any, **options: Any) -> FoosballEnv:
         cls.check_option_names(options)
@@ -228,7 +228,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         # Residual RL: the action corrects the scripted baseline, which sees what the agent saw.
         self._baseline = self.scripted_policy() if self.residual else None
         self._last_obs: np.ndarray | None = None
-        self._rewards = RewardComputer(self.weights, [T.rod(r) for r in layout.controlled])
+        self._rewards = RewardComputer(self.weights, [table.rod(r) for r in layout.controlled])
 
         # Imported here: building a task's interface needs no simulator. The simulator checks
         # the physics options.

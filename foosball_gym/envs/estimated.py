@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.camera import CameraNoise
 from foosball_gym.policy_io.observations import ObservationBuilder
 
@@ -87,8 +87,8 @@ class EstimatedState:
         }
         hidden = noise.hide_under_figurines and bool(
             np.any(
-                (np.abs(figurines[:, 0] - x) < T.FIGURINE_SIZE[0] / 2)
-                & (np.abs(figurines[:, 1] - y) < T.FIGURINE_SIZE[1] / 2)
+                (np.abs(figurines[:, 0] - x) < table.FIGURINE_SIZE[0] / 2)
+                & (np.abs(figurines[:, 1] - y) < table.FIGURINE_SIZE[1] / 2)
             )
         )
         if hidden or rng.random() < noise.drop_rate:

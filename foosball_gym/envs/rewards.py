@@ -1,4 +1,4 @@
-"""Reward terms of the paper (SPEC §3), each with its own weight.
+"""Reward terms of the paper (docs/envs/index.md), each with its own weight.
 
 Base terms: ``goal`` (+weight for a goal scored, -weight for one conceded) and
 ``out_of_table`` (-weight when the ball leaves the table upwards). Shaping terms, off at weight
@@ -14,7 +14,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from foosball_gym import table as T
+from foosball_gym import table
 
 SHAPING_MODES = ("difference", "potential")
 TERMS = ("goal", "out_of_table", "ball_to_goal", "figurine_to_ball", "action_regularisation")
@@ -45,8 +45,8 @@ class RewardWeights:
 
 def ball_to_goal_potential(x: float, y: float) -> float:
     """exp(-6 d), d the distance from the ball to the away goal mouth (home attacks +x)."""
-    dy = abs(y) - T.GOAL_MOUTH_HALF
-    d = math.hypot(x - T.GOAL_LINE_X, dy if dy > 0 else 0.0)
+    dy = abs(y) - table.GOAL_MOUTH_HALF
+    d = math.hypot(x - table.GOAL_LINE_X, dy if dy > 0 else 0.0)
     return math.exp(-6.0 * d)
 
 
@@ -66,7 +66,7 @@ class RewardComputer:
         rods: the controlled rods (for figurine-to-ball).
     """
 
-    def __init__(self, weights: RewardWeights, rods: Sequence[T.Rod]) -> None:
+    def __init__(self, weights: RewardWeights, rods: Sequence[table.Rod]) -> None:
         self.w = weights
         self.rods = tuple(rods)
         self._phi_goal = 0.0

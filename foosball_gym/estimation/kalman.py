@@ -13,14 +13,14 @@ import numpy as np
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import KalmanFilter
 
-from foosball_gym import table as T
+from foosball_gym import table
 
-_WALL_Y = T.BALL_LIMIT_Y
-_WALL_X = T.BALL_LIMIT_X
+_WALL_Y = table.BALL_LIMIT_Y
+_WALL_X = table.BALL_LIMIT_X
 
 
 def bounce(
-    x: float, y: float, vx: float, vy: float, restitution: float = T.BALL_RESTITUTION
+    x: float, y: float, vx: float, vy: float, restitution: float = table.BALL_RESTITUTION
 ) -> tuple[float, float, float, float]:
     """A ball state past a wall, brought back into the field as the bounce would.
 
@@ -35,7 +35,7 @@ def bounce(
         if abs(y) > _WALL_Y:
             edge = math.copysign(_WALL_Y, y)
             y, vy = (edge - e * (y - edge), -e * vy) if y * vy > 0 else (edge, vy)
-        elif abs(x) > _WALL_X and abs(y) > T.GOAL_HALF_WIDTH:
+        elif abs(x) > _WALL_X and abs(y) > table.GOAL_HALF_WIDTH:
             edge = math.copysign(_WALL_X, x)
             x, vx = (edge - e * (x - edge), -e * vx) if x * vx > 0 else (edge, vx)
         else:
@@ -64,7 +64,7 @@ class BallFilter:
         acceleration_std: float = 40.0,
         stale_after: float = 0.2,
         reset_after: float = 0.5,
-        wall_restitution: float = T.BALL_RESTITUTION,
+        wall_restitution: float = table.BALL_RESTITUTION,
     ) -> None:
         self.kf = KalmanFilter(dim_x=4, dim_z=2)
         self.kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])

@@ -6,7 +6,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.estimation.kalman import BallFilter, RodFilter
 from foosball_gym.policy_io.observations import ObservationBuilder
 
@@ -41,7 +41,7 @@ class TableStateEstimator:
         # The rods the camera tracks: the opponent's, and still obstacles (observed by slide).
         tracked = list(builder.tracked_rods)
         self.rods = {
-            name: RodFilter(T.rod(name).slide_limit, rod_measurement_std) for name in tracked
+            name: RodFilter(table.rod(name).slide_limit, rod_measurement_std) for name in tracked
         }
         self._slot = {name: builder.rods_in_play.index(name) for name in tracked}
         self._n = len(builder.rods_in_play)

@@ -23,7 +23,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from foosball_gym import table as T
+from foosball_gym import table
 
 Joint = tuple[str, str]  # (rod name, "slide" | "spin"), as in foosball_gym.policy_io.task
 
@@ -154,7 +154,7 @@ class JointConfig:
     max_acceleration: float | None = None
 
     def __post_init__(self) -> None:
-        _choice("rod", self.rod, tuple(T.ROD_BY_NAME))
+        _choice("rod", self.rod, tuple(table.ROD_BY_NAME))
         _choice("joint", self.joint, JOINT_KINDS)
         node_id = _integer("node_id", self.node_id)
         if not 1 <= node_id <= 127:
@@ -204,11 +204,11 @@ class JointConfig:
     @property
     def hard_limit(self) -> float:
         """The table's joint limit: the joint moves in ``[-hard_limit, hard_limit]``."""
-        return T.rod(self.rod).slide_limit if self.joint == "slide" else T.SPIN_LIMIT
+        return table.rod(self.rod).slide_limit if self.joint == "slide" else table.SPIN_LIMIT
 
     @property
     def drive_max_speed(self) -> float:
-        return T.SLIDE_MAX_SPEED if self.joint == "slide" else T.SPIN_MAX_SPEED
+        return table.SLIDE_MAX_SPEED if self.joint == "slide" else table.SPIN_MAX_SPEED
 
     @property
     def label(self) -> str:
@@ -256,7 +256,7 @@ class TableConfig:
 
     joints: list[JointConfig]
     bus: BusConfig = field(default_factory=BusConfig)
-    control_hz: float = float(T.CONTROL_HZ)
+    control_hz: float = float(table.CONTROL_HZ)
     mode: str = "csp"
     watchdog_s: float = 0.05
     heartbeat_timeout_s: float = 0.1

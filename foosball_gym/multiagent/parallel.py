@@ -16,7 +16,7 @@ from gymnasium import spaces
 from gymnasium.envs.registration import load_env_creator
 from pettingzoo import ParallelEnv
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.envs.base import RENDER_MODES, FoosballEnv
 from foosball_gym.envs.rewards import TERMS, RewardComputer
 from foosball_gym.policy_io.observations import check_flag, mirrored_builder
@@ -85,7 +85,7 @@ class FoosballParallelEnv(ParallelEnv):
 
     metadata = {
         "render_modes": list(RENDER_MODES),
-        "render_fps": T.CONTROL_HZ,
+        "render_fps": table.CONTROL_HZ,
         "is_parallelizable": True,
     }
 
@@ -129,9 +129,10 @@ class FoosballParallelEnv(ParallelEnv):
         # seen as the home rods they mirror (figurine_y flips sign with the team), the ball
         # turned about the centre of the table.
         self._rewards = {
-            "home": RewardComputer(env.weights, [T.rod(r) for r in layout.controlled]),
+            "home": RewardComputer(env.weights, [table.rod(r) for r in layout.controlled]),
             "away": RewardComputer(
-                env.weights, [T.rod(f"{T.HOME}_{T.rod(r).role}") for r in layout.opponent]
+                env.weights,
+                [table.rod(f"{table.HOME}_{table.rod(r).role}") for r in layout.opponent],
             ),
         }
         n_home = len(layout.controlled)

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.policy_io.task import Layout, action_joints, check_action
 
 Keys = Callable[[], tuple[frozenset[str], frozenset[str]]]
@@ -115,7 +115,7 @@ class KeyboardRod:
     ) -> None:
         if not dt > 0:
             raise ValueError(f"dt must be positive, got {dt}")
-        self.rod = T.rod(rod)
+        self.rod = table.rod(rod)
         self.dt = float(dt)
         self.slide_speed, self.kick_angle = slide_speed, kick_angle
         self.kick_time, self.lift_angle = kick_time, lift_angle

@@ -19,7 +19,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from foosball_gym import table as T
 from foosball_gym.estimation import BallFilter, TableStateEstimator
 from foosball_gym.hardware.config import TableConfig
 from foosball_gym.hardware.drives import TableDrives
@@ -27,6 +26,7 @@ from foosball_gym.play.human import KEY_HINT, HumanOpponent, human_rod
 from foosball_gym.play.loop import STAGES, LoopRecord, PlayLoop, StatusLine
 from foosball_gym.play.session import SessionLog
 from foosball_gym.policy_io.task import TaskInterface
+from foosball_gym.table import rod
 from foosball_gym.vision import (
     CameraCalibration,
     ColourBallDetector,
@@ -129,7 +129,7 @@ def build_perception(
         detector = ColourBallDetector(**vision.get("ball", {}))
     # The camera follows the opponent's rods, and still obstacles where a task has them.
     builder = interface.builder
-    tracked = [T.rod(name) for name in builder.tracked_rods]
+    tracked = [rod(name) for name in builder.tracked_rods]
     tracker = RodTracker(calibration, tracked, **vision.get("rods", {})) if tracked else None
     latency = latency_s if latency_s is not None else estimation.get("latency_s", 0.03)
     estimator = TableStateEstimator(

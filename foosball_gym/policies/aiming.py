@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 
 # Ball-minus-figurine y offset (m) -> shot angle from +x (degrees).
 _OFFSETS = np.arange(0.009, 0.0265, 0.001)
@@ -30,16 +30,16 @@ ANGLE_ERROR = math.radians(1.0)
 ANGLE_ERROR_SLOPE = 0.1
 CLEAR_ENOUGH = 0.02
 
-_WALL = T.BALL_LIMIT_Y
+_WALL = table.BALL_LIMIT_Y
 # A ball whose centre crosses the line within the opening is a goal; one that grazes a post
 # mostly goes in, so the lane only has to keep the centre a little inside.
-_GOAL = T.GOAL_HALF_WIDTH - 0.005
+_GOAL = table.GOAL_HALF_WIDTH - 0.005
 # Half the width a figurine blocks: its leg's half width plus the ball's radius.
-_BLOCK = T.FIGURINE_LEG_HALF_WIDTH + T.BALL_RADIUS
+_BLOCK = table.FIGURINE_LEG_HALF_WIDTH + table.BALL_RADIUS
 # A fast bank shot keeps only about a quarter of its sideways speed in the simulator, but
 # planning with that chose steeper, less accurate kicks and scored less (40 % against 45 %
 # over 300 obstacle layouts) than planning with the nominal half.
-_WALL_RESTITUTION = T.BALL_TABLE_RESTITUTION
+_WALL_RESTITUTION = table.BALL_TABLE_RESTITUTION
 
 
 def offset_for_angle(angle: float) -> float:
@@ -76,7 +76,7 @@ def clearance(
     """The smallest margin (m) by which a shot at ``angle`` passes every blocking figurine
     and stays inside the goal mouth; negative when it is blocked or misses."""
     ahead = sorted((bx, fys) for bx, fys in blockers if bx > x0)
-    xs = [bx for bx, _ in ahead] + [T.GOAL_LINE_X]
+    xs = [bx for bx, _ in ahead] + [table.GOAL_LINE_X]
     ys = path_y(x0, y0, angle, xs)
 
     margin = _GOAL - abs(ys[-1])

@@ -13,13 +13,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.policies.aiming import clearance, offset_for_angle, plan_shot
 from foosball_gym.policies.deflection import deflection_offset
 
-_WALL = T.BALL_LIMIT_Y
+_WALL = table.BALL_LIMIT_Y
 # How far in front of a rod (ball centre minus rod x) a swing of the foot reaches the ball.
-_REACH_NEAR = T.FIGURINE_SIZE[0] / 2 + T.BALL_RADIUS - 0.004
+_REACH_NEAR = table.FIGURINE_SIZE[0] / 2 + table.BALL_RADIUS - 0.004
 _REACH_FAR = 0.075
 _SLOW = 1.5  # m/s: a ball slower than this in reach gets kicked
 _AIM_SPEED = 0.3  # m/s: a ball slower than this in reach gets an aimed kick
@@ -58,7 +58,7 @@ def crossing(x: float, y: float, vx: float, vy: float, line_x: float) -> tuple[f
             return reach, slope
         wall = math.copysign(_WALL, slope)
         run -= (wall - y) / slope
-        y, slope = wall, -slope * T.wall_bounce_slope_ratio(slope)
+        y, slope = wall, -slope * table.wall_bounce_slope_ratio(slope)
     return y, slope
 
 
@@ -71,9 +71,13 @@ def _find(names: Sequence[str], name: str) -> int:
         ) from None
 
 
-def _home_rod(name: str) -> T.Rod:
+def _home_rod(name: str) -> table.Rod:
     """The home rod with the role of ``name``: scripted play always reasons from home."""
-    return T.rod(f"{T.HOME}_{name.split('_', 1)[1]}") if name.startswith(T.AWAY) else T.rod(name)
+    return (
+        table.rod(f"{table.HOME}_{name.split('_', 1)[1]}")
+        if name.startswith(table.AWAY)
+        else table.rod(name)
+    )
 
 
 class ScriptedTeam:
@@ -131,13 +135,13 @@ class ScriptedTeam:
         self.n_actions = len(self.rods) * (2 if joints == "both" else 1)
         self.aim = aim and self.kick
         # The other team's rods the observation places, as the home side sees them.
-        other = T.HOME if str(rods[0]).startswith(T.AWAY) else T.AWAY
+        other = table.HOME if str(rods[0]).startswith(table.AWAY) else table.AWAY
         self._blockers = []
         if self.aim:
-            for role in T.ROLES:
+            for role in table.ROLES:
                 name = f"{other}_{role}_slide_pos"
                 if name in names:
-                    self._blockers.append((T.rod(f"{T.AWAY}_{role}"), names.index(name)))
+                    self._blockers.append((table.rod(f"{table.AWAY}_{role}"), names.index(name)))
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         # Python floats: numpy's scalars cost more to compute with than they save.
@@ -158,7 +162,7 @@ class ScriptedTeam:
             out.append(slide_for(rod, target) / rod.slide_limit)
             if self.joints == "both":
                 state = None if own is None else (float(obs[own[0]]), float(obs[own[1]]))
-                out.append(self.spin_for(rod, x, y, vx, vy, state, offset) / T.SPIN_LIMIT)
+                out.append(self.spin_for(rod, x, y, vx, vy, state, offset) / table.SPIN_LIMIT)
         return np.array(out, dtype=np.float32)
 
     def _blocker_positions(self, obs: Sequence[float]) -> list[tuple[float, tuple[float, ...]]]:
@@ -167,7 +171,7 @@ class ScriptedTeam:
 
     def _deflection(
         self,
-        rod: T.Rod,
+        rod: table.Rod,
         slide: float,
         x: float,
         y: float,
@@ -183,7 +187,7 @@ class ScriptedTeam:
         if path is None:
             return None
         cross, slope = path
-        goal = T.GOAL_LINE_X - rod.x
+        goal = table.GOAL_LINE_X - rod.x
         want = math.atan2(-cross, goal)
         if self._blockers:
             blockers = self._blocker_positions(obs)
@@ -199,13 +203,13 @@ class ScriptedTeam:
         command = min(max(command, -rod.slide_limit), rod.slide_limit)
         return command / rod.slide_limit, 0.0
 
-    def _in_reach(self, rod: T.Rod, x: float, vx: float, vy: float) -> bool:
+    def _in_reach(self, rod: table.Rod, x: float, vx: float, vy: float) -> bool:
         # Only a ball lying still in front is worth the time a precise line-up takes: one
         # rolling at the rod gets past while the foot moves aside for a corner kick.
         return 0.0 < x - rod.x < _REACH_FAR and vx * vx + vy * vy < _AIM_SPEED**2
 
     @staticmethod
-    def target_y(rod: T.Rod, x: float, y: float, vx: float, vy: float) -> float:
+    def target_y(rod: table.Rod, x: float, y: float, vx: float, vy: float) -> float:
         """World y where ``rod`` should put its nearest figurine."""
         if vx < -0.05 and x > rod.x:
             cross = crossing_y(x, y, vx, vy, rod.x)
@@ -215,7 +219,7 @@ class ScriptedTeam:
 
     def spin_for(
         self,
-        rod: T.Rod,
+        rod: table.Rod,
         x: float,
         y: float,
         vx: float,
@@ -249,7 +253,7 @@ class ScriptedTeam:
         return 0.0
 
 
-def slide_for(rod: T.Rod, y: float) -> float:
+def slide_for(rod: table.Rod, y: float) -> float:
     """The prismatic value that brings the figurine of ``rod`` nearest to ``y`` onto it."""
     best_miss, best = math.inf, 0.0
     for off in rod.figurine_offsets:

@@ -23,7 +23,7 @@ from operator import itemgetter
 import numpy as np
 from gymnasium import spaces
 
-from foosball_gym import table as T
+from foosball_gym import table
 
 JOINT_SETS = ("slide", "both")
 BALL_NAMES = ("ball_x", "ball_y", "ball_vx", "ball_vy")
@@ -76,7 +76,7 @@ def observation_options(
 OBSERVATION_OPTIONS = ("joint_velocities", "observe_figurines", "opponent_prismatic_only")
 
 
-def _joints(rod: T.Rod, joints: str) -> tuple[str, ...]:
+def _joints(rod: table.Rod, joints: str) -> tuple[str, ...]:
     return ("slide",) if joints == "slide" else ("slide", "spin")
 
 
@@ -127,7 +127,7 @@ class ObservationBuilder:
 
         names: list[str] = []
         take: list[int] = []
-        self._figurine_blocks: list[tuple[int, tuple[tuple[int, T.Rod], ...], bool, bool]] = []
+        self._figurine_blocks: list[tuple[int, tuple[tuple[int, table.Rod], ...], bool, bool]] = []
         for side, rods, joints in (
             ("own", self.own, own_joints),
             ("opponent", self.opponent, opp_joints),
@@ -141,7 +141,7 @@ class ObservationBuilder:
                 self._figurine_blocks.append(
                     (
                         start,
-                        tuple((self._index[r], T.rod(r)) for r in rods),
+                        tuple((self._index[r], table.rod(r)) for r in rods),
                         y_only,
                         options.joint_velocities,
                     )
@@ -152,7 +152,7 @@ class ObservationBuilder:
                 if kind == "vel" and not options.joint_velocities:
                     continue
                 for rod_name in rods:
-                    for joint in _joints(T.rod(rod_name), joints):
+                    for joint in _joints(table.rod(rod_name), joints):
                         names.append(f"{rod_name}_{joint}_{kind}")
                         j = self._index[rod_name] + (n if joint == "spin" else 0)
                         take.append(offset + j)
@@ -174,7 +174,7 @@ class ObservationBuilder:
     def _figurine_names(rods: Sequence[str], y_only: bool, velocities: bool) -> list[str]:
         names = []
         for rod_name in rods:
-            for i in range(len(T.rod(rod_name).figurine_offsets)):
+            for i in range(len(table.rod(rod_name).figurine_offsets)):
                 axes = ("y",) if y_only else ("x", "y")
                 prefix = "v" if velocities else ""
                 names += [f"{rod_name}_figurine_{i}_{prefix}{a}" for a in axes]
@@ -241,7 +241,7 @@ def mirrored_builder(builder: ObservationBuilder) -> ObservationBuilder:
 
     def swap(name: str) -> str:
         team, role = name.split("_", 1)
-        return f"{T.AWAY if team == T.HOME else T.HOME}_{role}"
+        return f"{table.AWAY if team == table.HOME else table.HOME}_{role}"
 
     if {swap(r) for r in builder.own} != set(builder.opponent) or builder.extras:
         raise ValueError(

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.policy_io.observations import ObservationBuilder, ObservationOptions
 
 Joint = tuple[str, str]  # (rod name, "slide" | "spin")
@@ -49,10 +49,10 @@ def action_joints(
     driven, scales, held = [], [], []
     for name in rods:
         driven.append((name, "slide"))
-        scales.append(T.rod(name).slide_limit)
+        scales.append(table.rod(name).slide_limit)
         if joints == "both":
             driven.append((name, "spin"))
-            scales.append(T.SPIN_LIMIT)
+            scales.append(table.SPIN_LIMIT)
         else:
             held.append((name, "spin"))
     return tuple(driven), tuple(scales), tuple(held)

@@ -15,7 +15,7 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from foosball_gym import table as T
+from foosball_gym import table
 
 if TYPE_CHECKING:
     from foosball_gym.sim.drives import RodDrives
@@ -23,11 +23,13 @@ if TYPE_CHECKING:
 # Where a figurine can be, in the plane across its rod (distances from the rod's axis): the
 # body, a box round the axis, reaches BODY_REACH; the leg spans LEG_INNER..LEG_OUTER (the
 # reach of the sole) within LEG_HALF_ANGLE either side of the line the spin angle points along.
-BODY_REACH = math.hypot(T.ROD_HEIGHT - T.FIGURINE_LEG_TOP, T.FIGURINE_SIZE[0] / 2)
-LEG_INNER = T.ROD_HEIGHT - T.FIGURINE_LEG_TOP
-LEG_OUTER = T.FIGURINE_REACH
-LEG_HALF_ANGLE = math.atan2(max(max(-x0, x1) for _, x0, x1 in T.FIGURINE_LEG_SECTIONS), LEG_INNER)
-FIGURINE_HALF_WIDTH = T.FIGURINE_SIZE[1] / 2
+BODY_REACH = math.hypot(table.ROD_HEIGHT - table.FIGURINE_LEG_TOP, table.FIGURINE_SIZE[0] / 2)
+LEG_INNER = table.ROD_HEIGHT - table.FIGURINE_LEG_TOP
+LEG_OUTER = table.FIGURINE_REACH
+LEG_HALF_ANGLE = math.atan2(
+    max(max(-x0, x1) for _, x0, x1 in table.FIGURINE_LEG_SECTIONS), LEG_INNER
+)
+FIGURINE_HALF_WIDTH = table.FIGURINE_SIZE[1] / 2
 # What a check of "could these touch within the step" adds to the distances, for the rounding
 # of everything it leaves out (the ball's spin, contact slop).
 NEAR_MARGIN = 0.002
@@ -75,7 +77,7 @@ class Reach:
 
     def __init__(
         self,
-        rods: Sequence[T.Rod],
+        rods: Sequence[table.Rod],
         drives: RodDrives,
         accel: Sequence[float],
         physics_hz: int,
@@ -104,10 +106,10 @@ class Reach:
         least = max(1, round(dt * self.physics_hz))
         x, y, z, vx, vy, vz = ball
         speed = math.sqrt(vx * vx + vy * vy + vz * vz)
-        wall_gap = min(T.FIELD_HALF_WIDTH - abs(y), T.FIELD_HALF_LENGTH - abs(x))
+        wall_gap = min(table.FIELD_HALF_WIDTH - abs(y), table.FIELD_HALF_LENGTH - abs(x))
         touching: list[int] = []
         figurine = 0.0
-        reach = speed * dt + NEAR_MARGIN + T.BALL_RADIUS
+        reach = speed * dt + NEAR_MARGIN + table.BALL_RADIUS
         while True:
             # A figurine reaches no further than LEG_OUTER from its axis: rods further off in
             # x are out of it at once.
@@ -123,12 +125,14 @@ class Reach:
             if not found:
                 break
             # A kick: the ball may leave faster than it came, and reach further rods.
-            fastest = min(speed + (1 + T.BALL_FIGURINE_RESTITUTION) * figurine, T.RESOLVED_SPEED)
-            further = fastest * dt + NEAR_MARGIN + T.BALL_RADIUS
+            fastest = min(
+                speed + (1 + table.BALL_FIGURINE_RESTITUTION) * figurine, table.RESOLVED_SPEED
+            )
+            further = fastest * dt + NEAR_MARGIN + table.BALL_RADIUS
             if further <= reach:
                 break
             reach = further
-        reach = speed * dt + NEAR_MARGIN + T.BALL_RADIUS
+        reach = speed * dt + NEAR_MARGIN + table.BALL_RADIUS
         wall = wall_gap < reach or (vz < -FALLING and z < reach)
         if not touching:
             if not wall:
@@ -136,10 +140,12 @@ class Reach:
             # A wall is flat: how deep the ball gets in before it bounces does not turn the
             # bounce, so walls alone need only half the resolution of a figurine's round end.
             travel = WALL_TRAVEL_FACTOR * self.contact_travel
-            return max(least, math.ceil(min(speed, T.RESOLVED_SPEED) * dt / travel)), ()
+            return max(least, math.ceil(min(speed, table.RESOLVED_SPEED) * dt / travel)), ()
         # Faster than the spec's fastest ball only a foot swinging at full speed goes; it is
         # resolved as coarsely as a 20 m/s ball, so a step's travel grows with its speed.
-        relative = min(speed + (1 + T.BALL_FIGURINE_RESTITUTION) * figurine, T.RESOLVED_SPEED)
+        relative = min(
+            speed + (1 + table.BALL_FIGURINE_RESTITUTION) * figurine, table.RESOLVED_SPEED
+        )
         return max(least, math.ceil(relative * dt / self.contact_travel)), tuple(sorted(touching))
 
     def _touch_speed(
@@ -149,7 +155,7 @@ class Reach:
         them can come within ``reach`` of its centre."""
         rod = self.rods[i]
         dx = x - rod.x
-        dz = z - T.ROD_HEIGHT
+        dz = z - table.ROD_HEIGHT
         rho = math.sqrt(dx * dx + dz * dz)
         if rho - reach > LEG_OUTER:
             return None  # beyond the reach of the rod's figurines at any spin

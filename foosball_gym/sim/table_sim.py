@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.camera import CameraModel
 from foosball_gym.physics_options import check_physics
 from foosball_gym.sim.contacts import Reach
@@ -48,7 +48,7 @@ from foosball_gym.sim.worlds import ERP_RATE, UPRIGHT, TableWorlds, World, drive
 
 __all__ = ["AWAY_SCORED", "CONTROL_MODES", "HOME_SCORED", "NO_GOAL", "BallState", "TableSim"]
 
-NO_GOAL, HOME_SCORED, AWAY_SCORED = T.NO_GOAL, T.HOME_SCORED, T.AWAY_SCORED
+NO_GOAL, HOME_SCORED, AWAY_SCORED = table.NO_GOAL, table.HOME_SCORED, table.AWAY_SCORED
 
 
 @dataclass
@@ -79,10 +79,10 @@ class TableSim:
         self,
         rods: Sequence[str],
         *,
-        physics_hz: int = T.PHYSICS_HZ,
-        control_hz: int = T.CONTROL_HZ,
-        contact_travel: float = T.CONTACT_TRAVEL,
-        rolling_resistance: float = T.ROLLING_RESISTANCE,
+        physics_hz: int = table.PHYSICS_HZ,
+        control_hz: int = table.CONTROL_HZ,
+        contact_travel: float = table.CONTACT_TRAVEL,
+        rolling_resistance: float = table.ROLLING_RESISTANCE,
         gui: bool = False,
         slide_gain: float = 48.0,
         spin_gain: float = 72.0,
@@ -92,10 +92,10 @@ class TableSim:
         )
         names = tuple(rods)
         for name in names:
-            T.rod(name)
+            table.rod(name)
         if len(set(names)) != len(names):
             raise ValueError(f"each rod may be in play once, got {names}")
-        self.rods: tuple[T.Rod, ...] = tuple(T.rod(n) for n in names)
+        self.rods: tuple[table.Rod, ...] = tuple(table.rod(n) for n in names)
         self.physics_hz = physics_hz
         self.control_hz = control_hz
         self.substeps = physics_hz // control_hz
@@ -110,10 +110,10 @@ class TableSim:
         self._drives = RodDrives(
             mass=mass,
             gravity=gravity,
-            max_force=[T.SLIDE_MAX_FORCE] * n + [T.SPIN_MAX_TORQUE] * n,
-            max_speed=[T.SLIDE_MAX_SPEED] * n + [T.SPIN_MAX_SPEED] * n,
-            lower=[-r.slide_limit for r in self.rods] + [-T.SPIN_LIMIT] * n,
-            upper=[r.slide_limit for r in self.rods] + [T.SPIN_LIMIT] * n,
+            max_force=[table.SLIDE_MAX_FORCE] * n + [table.SPIN_MAX_TORQUE] * n,
+            max_speed=[table.SLIDE_MAX_SPEED] * n + [table.SPIN_MAX_SPEED] * n,
+            lower=[-r.slide_limit for r in self.rods] + [-table.SPIN_LIMIT] * n,
+            upper=[r.slide_limit for r in self.rods] + [table.SPIN_LIMIT] * n,
             gains=[0.0] * 2 * n,
             erp_rate=ERP_RATE,
         )
@@ -128,10 +128,10 @@ class TableSim:
         self._reach = Reach(self.rods, self._drives, accel, physics_hz, contact_travel)
         self.set_drive_gains(slide_gain, spin_gain)
 
-        self.ball_mass = T.BALL_MASS
-        self.ball_friction = T.BALL_MATERIAL.dynamic_friction
-        self.ball_restitution = T.BALL_TABLE_RESTITUTION
-        self.ball_damping = T.BALL_LINEAR_DAMPING
+        self.ball_mass = table.BALL_MASS
+        self.ball_friction = table.BALL_MATERIAL.dynamic_friction
+        self.ball_restitution = table.BALL_TABLE_RESTITUTION
+        self.ball_damping = table.BALL_LINEAR_DAMPING
         self.rolling_resistance = rolling_resistance
         self._worlds = TableWorlds(self.rods, self._drives, physics_hz)
         self._closed = False
@@ -139,7 +139,7 @@ class TableSim:
         # The ball's position, orientation, velocity and spin as the last step left it (None
         # while a world holding it has moved on).
         self._ball_state: tuple | None = (
-            (0.0, 0.0, T.BALL_RADIUS),
+            (0.0, 0.0, table.BALL_RADIUS),
             UPRIGHT,
             (0.0,) * 3,
             (0.0,) * 3,
@@ -272,12 +272,14 @@ class TableSim:
         pos = [float(v) for v in position]
         vel = [float(v) for v in velocity]
         if len(pos) == 2:
-            pos.append(T.BALL_RADIUS)
+            pos.append(table.BALL_RADIUS)
         if len(vel) == 2:
             vel.append(0.0)
         if len(pos) != 3 or len(vel) != 3:
             raise ValueError("ball position and velocity take 2 (x, y) or 3 (x, y, z) values")
-        spin = [-vel[1] / T.BALL_RADIUS, vel[0] / T.BALL_RADIUS, 0.0] if rolling else [0.0] * 3
+        spin = (
+            [-vel[1] / table.BALL_RADIUS, vel[0] / table.BALL_RADIUS, 0.0] if rolling else [0.0] * 3
+        )
         return tuple(pos), UPRIGHT, tuple(vel), tuple(spin)
 
     def _put_ball(self, ball: tuple) -> None:
@@ -367,13 +369,13 @@ class TableSim:
             if drives.mode == "torque":
                 torques = [drives.torques[j] for j in worlds.joints]
         step, box, ball = world.step, world.box, world.ball
-        line, half = T.GOAL_LINE_X, T.GOAL_HALF_WIDTH
+        line, half = table.GOAL_LINE_X, table.GOAL_HALF_WIDTH
         if not watch:
             # Without a figurine to kick it, the ball goes no faster than it does now; twice
             # as far, for a spinning ball that a wall turns upwards.
             x, _, z, vx, vy, vz = self._ball()
             travel = 2 * math.sqrt(vx * vx + vy * vy + vz * vz) * duration
-            watch = abs(x) + travel >= line or z + travel >= T.OUT_OF_TABLE_HEIGHT
+            watch = abs(x) + travel >= line or z + travel >= table.OUT_OF_TABLE_HEIGHT
         self._ball_state = None
         self.physics_steps += steps
         if not watch and torques is None:
@@ -395,7 +397,7 @@ class TableSim:
             x, y, z = x + x1, y + y1, z + z1
             if (x > 2 * line or x < -2 * line) and -2 * half <= y <= 2 * half:
                 return ((HOME_SCORED if x > 0 else AWAY_SCORED), False), k + 1
-            if z > 2 * T.OUT_OF_TABLE_HEIGHT:
+            if z > 2 * table.OUT_OF_TABLE_HEIGHT:
                 return (NO_GOAL, True), k + 1
         return (NO_GOAL, False), steps
 
@@ -495,7 +497,7 @@ class TableSim:
 
 
 def figurine_centres(
-    rods: Sequence[T.Rod], slide: Sequence[float], spin: Sequence[float]
+    rods: Sequence[table.Rod], slide: Sequence[float], spin: Sequence[float]
 ) -> np.ndarray:
     """World centres of the figurines of ``rods`` for given joint values, (N, 3)."""
     out = []

@@ -10,7 +10,7 @@ from functools import cache
 from importlib import resources
 from pathlib import Path
 
-from foosball_gym import table as T
+from foosball_gym import table
 
 
 def urdf_path(name: str = "foosball_table.urdf") -> Path:
@@ -30,7 +30,7 @@ def urdf_with_rods(rod_names: tuple[str, ...]) -> str:
     keep = set(rod_names)
 
     def rod_of(name: str) -> str | None:
-        for rod in T.RODS:
+        for rod in table.RODS:
             if name.startswith(rod.name + "_"):
                 return rod.name
         return None

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.camera import CameraModel
 from foosball_gym.sim.worlds import UPRIGHT, World, pybullet
 
@@ -31,7 +31,7 @@ _TEXT_LINE = 0.04
 class View:
     """The table ``rods`` in a world of its own, in the GUI window with ``gui``."""
 
-    def __init__(self, rods: Sequence[T.Rod], gui: bool) -> None:
+    def __init__(self, rods: Sequence[table.Rod], gui: bool) -> None:
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
             raise RuntimeError(
                 "the PyBullet GUI (render_mode='human') needs a display and "
@@ -69,11 +69,11 @@ class View:
             shown = self._text_items[i] if i < len(self._text_items) else None
             if shown is not None and shown[0] == line:
                 continue
-            beyond = T.FIELD_HALF_WIDTH + _TEXT_MARGIN
+            beyond = table.FIELD_HALF_WIDTH + _TEXT_MARGIN
             y = beyond if i == 0 else -(beyond + (i - 1) * _TEXT_LINE)
             item = p.addUserDebugText(
                 line,
-                [-T.FIELD_HALF_LENGTH, y, 0.1],
+                [-table.FIELD_HALF_LENGTH, y, 0.1],
                 textColorRGB=[0, 0, 0],
                 textSize=1.5,
                 replaceItemUniqueId=shown[1] if shown is not None else -1,

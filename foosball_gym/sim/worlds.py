@@ -23,7 +23,7 @@ from collections.abc import Callable, Iterator, Sequence
 from functools import cache
 from typing import TYPE_CHECKING
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.sim.urdf import urdf_path, urdf_with_rods
 
 if TYPE_CHECKING:
@@ -68,13 +68,13 @@ with _quiet_stdout():
 # Bullet's 0.2 per step made a wall rebound keep 0.51-0.70 of the normal speed instead of 0.5;
 # 0.01 per 240 Hz step keeps 0.48-0.51, and a ball at rest still sits on the surface to 0.01 mm.
 # Per second, so that finer steps do not push harder.
-ERP_RATE = 0.01 * T.PHYSICS_HZ
+ERP_RATE = 0.01 * table.PHYSICS_HZ
 # Where a world's ball waits while Bullet forgets its contacts (see World.clear).
 _ASIDE = (0.0, 0.0, 5.0)
 _STILL = (0.0, 0.0, 0.0)
 UPRIGHT = (0.0, 0.0, 0.0, 1.0)
 # Rods closer than this (m) share a world: the ball can be near both within a base step.
-_WINDOW_SPAN = 2 * (T.FIGURINE_REACH + T.BALL_RADIUS) + 0.2
+_WINDOW_SPAN = 2 * (table.FIGURINE_REACH + table.BALL_RADIUS) + 0.2
 # Where a world's rod that is not simulated waits (a slide, m): its figurines far beside the
 # table, out of the ball's way, at rest.
 _PARKED = 10.0
@@ -87,7 +87,7 @@ def connect(gui: bool = False) -> BulletClient:
 
 def _order(names: Sequence[str]) -> tuple[str, ...]:
     """Rod names in the table's order (``table.RODS``), as a world is keyed."""
-    rank = {rod.name: k for k, rod in enumerate(T.RODS)}
+    rank = {rod.name: k for k, rod in enumerate(table.RODS)}
     return tuple(sorted(names, key=rank.__getitem__))
 
 
@@ -108,7 +108,7 @@ def drive_masses(names: tuple[str, ...]) -> tuple[tuple[float, ...], tuple[float
         }
         slides, spins, gravity = [], [], []
         for name in names:
-            rod = T.rod(name)
+            rod = table.rod(name)
             carriage = client.getDynamicsInfo(body, index[rod.slide_joint])
             bar = client.getDynamicsInfo(body, index[rod.spin_joint])
             mass, inertia, (cx, _, cz) = bar[0], bar[2], bar[3]
@@ -152,7 +152,7 @@ class World:
         self.motors = functools.partial(pybullet.setJointMotorControlArray, physicsClientId=cid)
         self.set_engine = functools.partial(pybullet.setPhysicsEngineParameter, physicsClientId=cid)
         p.setGravity(0, 0, -9.81)
-        self.dt, self.substeps = 1.0 / T.PHYSICS_HZ, 1
+        self.dt, self.substeps = 1.0 / table.PHYSICS_HZ, 1
         p.setPhysicsEngineParameter(
             fixedTimeStep=self.dt,
             numSubSteps=0,
@@ -174,14 +174,14 @@ class World:
         }
         # Each rod's slide and spin link.
         self.links = {
-            name: (index[T.rod(name).slide_joint], index[T.rod(name).spin_joint])
+            name: (index[table.rod(name).slide_joint], index[table.rod(name).spin_joint])
             for name in self.names
         }
-        p.changeDynamics(self.body, -1, maxJointVelocity=T.SPIN_MAX_SPEED * 1.1)
+        p.changeDynamics(self.body, -1, maxJointVelocity=table.SPIN_MAX_SPEED * 1.1)
         for slide, spin in self.links.values():
             for link, force, speed in (
-                (slide, T.SLIDE_MAX_FORCE, T.SLIDE_MAX_SPEED),
-                (spin, T.SPIN_MAX_TORQUE, T.SPIN_MAX_SPEED),
+                (slide, table.SLIDE_MAX_FORCE, table.SLIDE_MAX_SPEED),
+                (spin, table.SPIN_MAX_TORQUE, table.SPIN_MAX_SPEED),
             ):
                 p.changeDynamics(
                     self.body, link, linearDamping=0.0, angularDamping=0.0, jointDamping=0.0
@@ -198,7 +198,9 @@ class World:
                 )
         with _quiet_stdout():
             self.ball = p.loadURDF(
-                str(urdf_path("ball.urdf")), [0.0, 0.0, T.BALL_RADIUS], useMaximalCoordinates=True
+                str(urdf_path("ball.urdf")),
+                [0.0, 0.0, table.BALL_RADIUS],
+                useMaximalCoordinates=True,
             )
         self.placed: set[str] = set(self.names)
         for name in self.names:
@@ -227,34 +229,39 @@ class World:
             return
         self.dynamics = values
         p = self.client
-        table_friction = T.combine(friction, T.TABLE_MATERIAL.dynamic_friction)
+        table_friction = table.combine(friction, table.TABLE_MATERIAL.dynamic_friction)
         # Bullet keeps one friction and one restitution per body and multiplies two bodies'
         # values; the authors' engine averages them. The ball is the only body that touches
         # anything, so it carries 1 and each body it can touch carries the value of its
         # contact with the ball (table.py: BALL_TABLE_*, BALL_FIGURINE_*). The ball on a
         # figurine departs from the authors' average (table.py says why); a randomised ball
         # friction scales it in proportion.
-        figurine_friction = T.BALL_FIGURINE_FRICTION * friction / T.BALL_MATERIAL.dynamic_friction
+        figurine_friction = (
+            table.BALL_FIGURINE_FRICTION * friction / table.BALL_MATERIAL.dynamic_friction
+        )
         p.changeDynamics(
-            self.body, -1, lateralFriction=table_friction, restitution=T.TABLE_MATERIAL.restitution
+            self.body,
+            -1,
+            lateralFriction=table_friction,
+            restitution=table.TABLE_MATERIAL.restitution,
         )
         for _, link in self.links.values():
             p.changeDynamics(
                 self.body,
                 link,
                 lateralFriction=figurine_friction,
-                restitution=T.FIGURINE_MATERIAL.restitution,
+                restitution=table.FIGURINE_MATERIAL.restitution,
             )
         # A rolling resistance torque mu * N slows a rolling solid sphere by (5/7) g mu / r;
         # Bullet's torque coefficient for the ball on the table is the ball's rolling friction
         # times the table's friction.
-        rolling = 1.4 * rolling_resistance * T.BALL_RADIUS / table_friction
+        rolling = 1.4 * rolling_resistance * table.BALL_RADIUS / table_friction
         p.changeDynamics(
             self.ball,
             -1,
             mass=mass,
             lateralFriction=1.0,
-            restitution=restitution / T.TABLE_MATERIAL.restitution,
+            restitution=restitution / table.TABLE_MATERIAL.restitution,
             rollingFriction=rolling,
             linearDamping=damping,
             angularDamping=0.0,
@@ -400,7 +407,7 @@ class TableWorlds:
             (slides, then spins), ``links`` their links there, ``parked`` the other joints.
     """
 
-    def __init__(self, rods: Sequence[T.Rod], drives: RodDrives, physics_hz: int) -> None:
+    def __init__(self, rods: Sequence[table.Rod], drives: RodDrives, physics_hz: int) -> None:
         self.rods = tuple(rods)
         self._drives = drives
         self._base_dt = 1.0 / physics_hz

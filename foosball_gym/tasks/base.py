@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.task import Layout
 
@@ -40,25 +40,25 @@ def check_pair(name: str, value: Any) -> tuple[float, float]:
 
 def check_ball_position(name: str, value: Any) -> tuple[float, float]:
     x, y = check_pair(name, value)
-    if abs(x) > T.BALL_LIMIT_X or abs(y) > T.BALL_LIMIT_Y:
+    if abs(x) > table.BALL_LIMIT_X or abs(y) > table.BALL_LIMIT_Y:
         raise ValueError(
             f"option {name!r} = ({x}, {y}) is off the field; the ball's centre must lie "
-            f"within |x| <= {T.BALL_LIMIT_X:.5f}, |y| <= {T.BALL_LIMIT_Y:.5f} m"
+            f"within |x| <= {table.BALL_LIMIT_X:.5f}, |y| <= {table.BALL_LIMIT_Y:.5f} m"
         )
     return x, y
 
 
-def clear_of_ball(rod: T.Rod, slide: float, ball: tuple[float, float]) -> float:
+def clear_of_ball(rod: table.Rod, slide: float, ball: tuple[float, float]) -> float:
     """A slide value near ``slide`` at which no figurine of ``rod`` overlaps the ball.
 
     Tasks put the ball at rest close to a rod; starting with a figurine inside the ball would
     throw it across the table on the first step.
     """
     bx, by = ball
-    reach_x = T.FIGURINE_SIZE[0] / 2 + T.BALL_RADIUS
+    reach_x = table.FIGURINE_SIZE[0] / 2 + table.BALL_RADIUS
     if abs(bx - rod.x) >= reach_x:
         return slide
-    gap = T.FIGURINE_SIZE[1] / 2 + T.BALL_RADIUS + 0.002
+    gap = table.FIGURINE_SIZE[1] / 2 + table.BALL_RADIUS + 0.002
     for off, fig_y in zip(rod.figurine_offsets, rod.figurine_y(slide)):
         if abs(fig_y - by) < gap:
             # Move the figurine just beside the ball, on whichever side stays within the limits.

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start, Task
 from foosball_gym.tasks.serves import Shots
@@ -36,7 +36,7 @@ class BlockTask(Task):
         position, velocity = self.shots.start(rng)
         if ball_position is not None:
             position = ball_position
-            velocity = self.shots.aim(rng, position, T.HOME)
+            velocity = self.shots.aim(rng, position, table.HOME)
         if ball_velocity is not None:
             velocity = ball_velocity
         return Start([0.0], [0.0], position, velocity)

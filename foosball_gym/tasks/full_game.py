@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.policy_io.observations import check_flag
 from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start, Task
@@ -19,8 +19,8 @@ class FullGameTask(Task):
     def __init__(self, *, continuous: bool = False) -> None:
         self.continuous = check_flag("continuous", continuous)
         self.continues_after_goal = self.continuous
-        home = tuple(r.name for r in T.team_rods(T.HOME))
-        away = tuple(r.name for r in T.team_rods(T.AWAY))
+        home = tuple(r.name for r in table.team_rods(table.HOME))
+        away = tuple(r.name for r in table.team_rods(table.AWAY))
         self.layout = Layout(controlled=home, joints="both", opponent=away)
 
     def sample_start(

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.policy_io.observations import check_flag
 from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start, Task
@@ -31,7 +31,7 @@ class KeeperVsKeeperTask(Task):
         ball_velocity=None,
         options: dict[str, Any] | None = None,
     ) -> Start:
-        team = T.HOME if rng.random() < 0.5 else T.AWAY
+        team = table.HOME if rng.random() < 0.5 else table.AWAY
         position = resting_in_front_of(rng, team)
         if ball_position is not None:
             position = ball_position

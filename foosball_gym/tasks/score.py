@@ -7,7 +7,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.observations import check_flag
 from foosball_gym.policy_io.task import Layout
@@ -48,13 +48,13 @@ class ScoreTask(Task):
     ) -> Start:
         options = options or {}
         if self.ball_start == "resting":
-            position, velocity = resting_in_front_of(rng, T.HOME), (0.0, 0.0)
+            position, velocity = resting_in_front_of(rng, table.HOME), (0.0, 0.0)
         else:
             position, velocity = self.shots.start(rng)
         if ball_position is not None:
             position = ball_position
             if self.ball_start == "incoming":
-                velocity = self.shots.aim(rng, position, T.HOME)
+                velocity = self.shots.aim(rng, position, table.HOME)
         if ball_velocity is not None:
             velocity = ball_velocity
         slide = [0.0]
@@ -66,7 +66,7 @@ class ScoreTask(Task):
 
     @staticmethod
     def _obstacle_positions(rng: np.random.Generator, given: Any) -> list[float]:
-        rods = [T.rod(name) for name in OBSTACLES]
+        rods = [table.rod(name) for name in OBSTACLES]
         if given is None:
             return [float(rng.uniform(-r.slide_limit, r.slide_limit)) for r in rods]
         try:

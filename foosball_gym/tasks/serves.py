@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 
-SHOT_SPEED_LIMITS = (1e-3, 2 * T.BALL_MAX_SPEED)
+SHOT_SPEED_LIMITS = (1e-3, 2 * table.BALL_MAX_SPEED)
 # The spec's resting ball: 0.497 m from the centre line, +-5 mm, in front of a keeper.
 REST_X, REST_X_JITTER, REST_Y = 0.497, 0.005, 0.1
 
@@ -39,8 +39,8 @@ def shot_at_goal(
     defender: str,
 ) -> tuple[float, float]:
     """Velocity of a shot from ``position`` at a uniform point of ``defender``'s goal mouth."""
-    goal_x = -T.GOAL_LINE_X if defender == T.HOME else T.GOAL_LINE_X
-    target_y = float(rng.uniform(-T.GOAL_MOUTH_HALF, T.GOAL_MOUTH_HALF))
+    goal_x = -table.GOAL_LINE_X if defender == table.HOME else table.GOAL_LINE_X
+    target_y = float(rng.uniform(-table.GOAL_MOUTH_HALF, table.GOAL_MOUTH_HALF))
     speed = float(rng.uniform(*speed_range))
     dx, dy = goal_x - position[0], target_y - position[1]
     norm = math.hypot(dx, dy)
@@ -51,7 +51,7 @@ def resting_in_front_of(rng: np.random.Generator, team: str) -> tuple[float, flo
     """A ball position at rest in front of ``team``'s keeper."""
     x = REST_X + float(rng.uniform(-REST_X_JITTER, REST_X_JITTER))
     y = float(rng.uniform(-REST_Y, REST_Y))
-    return (-x, y) if team == T.HOME else (x, y)
+    return (-x, y) if team == table.HOME else (x, y)
 
 
 # Steeper bank shots are not served: they hardly move towards the goal.
@@ -63,10 +63,10 @@ BANK_LAST_BOUNCE_X = -0.45
 # and within 2.2 cm of that for 90 % of them, 4 cm for 95 % (150 shots, keeper lifted): the
 # bounce ends a little deeper than the wall, and a slow ball curls as its spin settles. So they
 # are aimed at the middle of the mouth, allowing for the offset.
-BANK_AIM_HALF = T.GOAL_MOUTH_HALF - 0.03
+BANK_AIM_HALF = table.GOAL_MOUTH_HALF - 0.03
 BANK_AIM_OFFSET = 0.0085
-SERVE_X_LIMITS = (-0.1, T.BALL_LIMIT_X - 0.1)
-SERVE_Y_LIMITS = (-T.BALL_LIMIT_Y, T.BALL_LIMIT_Y)
+SERVE_X_LIMITS = (-0.1, table.BALL_LIMIT_X - 0.1)
+SERVE_Y_LIMITS = (-table.BALL_LIMIT_Y, table.BALL_LIMIT_Y)
 
 
 def check_share(name: str, value: Any) -> float:
@@ -114,11 +114,11 @@ class Shots:
         )
 
     def start(
-        self, rng: np.random.Generator, defender: str = T.HOME
+        self, rng: np.random.Generator, defender: str = table.HOME
     ) -> tuple[tuple[float, float], tuple[float, float]]:
         """A start position and the shot from it at ``defender``'s goal."""
         position = (float(rng.uniform(*self.x_range)), float(rng.uniform(*self.y_range)))
-        if defender == T.AWAY:
+        if defender == table.AWAY:
             position = (-position[0], -position[1])
         return position, self.aim(rng, position, defender)
 
@@ -131,7 +131,7 @@ class Shots:
         side = 1.0 if rng.uniform() < 0.5 else -1.0
         target_y = float(rng.uniform(-BANK_AIM_HALF, BANK_AIM_HALF))
         speed = float(rng.uniform(*self.speed_range))
-        flip = 1.0 if defender == T.HOME else -1.0
+        flip = 1.0 if defender == table.HOME else -1.0
         x, y = flip * position[0], flip * position[1]
         slope = bank_slope(x, y, target_y - side * BANK_AIM_OFFSET, side)
         if slope is None:
@@ -147,13 +147,13 @@ def bank_slope(x: float, y: float, target_y: float, side: float) -> float | None
     """|vy| / |vx| of a shot from (x, y) that meets the home goal line at ``target_y`` after
     one bounce off the side wall at ``side`` (+1 or -1); None where that takes a shot steeper
     than BANK_MAX_ANGLE or a bounce behind BANK_LAST_BOUNCE_X."""
-    wall = side * T.BALL_LIMIT_Y
-    run = x + T.GOAL_LINE_X
+    wall = side * table.BALL_LIMIT_Y
+    run = x + table.GOAL_LINE_X
     to_wall, from_wall = abs(wall - y), abs(wall - target_y)
 
     def short(slope: float) -> float:
         # How far short of the goal line (along x) the path at ``slope`` meets target_y.
-        return run - to_wall / slope - from_wall / (T.wall_bounce_slope_ratio(slope) * slope)
+        return run - to_wall / slope - from_wall / (table.wall_bounce_slope_ratio(slope) * slope)
 
     low, high = 1e-3, math.tan(math.radians(BANK_MAX_ANGLE))
     if short(high) < 0.0:

@@ -227,9 +227,9 @@ class TrainConfig:
                 "self-play here"
             )
         if self.self_play:
-            # The paper's self-play task has no early draw for a still ball (SPEC §4); written
-            # into env_kwargs so that the run's evaluations play the game it trained on. In a
-            # continuous match a still ball is served again, not drawn: that rule stays.
+            # The paper's self-play task has no early draw for a still ball (docs/self-play.md);
+            # written into env_kwargs so that the run's evaluations play the game it trained on.
+            # In a continuous match a still ball is served again, not drawn: that rule stays.
             if not self.env_kwargs.get("continuous"):
                 self.env_kwargs.setdefault("stagnation_steps", 0)
 

@@ -26,10 +26,10 @@ START_TIMEOUT_S = 60.0
 
 
 def _serve(conn: Connection, rods: tuple[str, ...], width: int, height: int) -> None:
-    from foosball_gym import table as T
+    from foosball_gym import table
     from foosball_gym.sim import View
 
-    view = View([T.rod(name) for name in rods], gui=False)
+    view = View([table.rod(name) for name in rods], gui=False)
     still = [0.0] * (2 * len(rods))
     try:
         # The first picture draws the table's fixed parts; drawn before the loop asks for one.

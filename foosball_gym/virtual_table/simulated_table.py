@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.camera import CameraModel, CameraNoise
 from foosball_gym.game import Game
 from foosball_gym.hardware.config import BusConfig, JointConfig, TableConfig
@@ -80,7 +80,7 @@ def virtual_table_config(interface: TaskInterface, mode: str = "csp") -> TableCo
                     # What the simulated drive reaches: the safety layer's default is a guess
                     # kept well inside a real drive's, which would make this table's keeper
                     # slower than the environment's.
-                    max_acceleration=drive_acceleration(T.rod(rod), kind),
+                    max_acceleration=drive_acceleration(table.rod(rod), kind),
                 )
             )
             node += 1
@@ -90,7 +90,7 @@ def virtual_table_config(interface: TaskInterface, mode: str = "csp") -> TableCo
     return TableConfig(
         joints=joints,
         bus=BusConfig(interface="virtual", channel=channel),
-        control_hz=float(T.CONTROL_HZ),
+        control_hz=float(table.CONTROL_HZ),
         mode=mode,
         heartbeat_timeout_s=SIM_HEARTBEAT_TIMEOUT_S,
     )
@@ -242,7 +242,7 @@ class SimulatedTable:
             return 0, False, False
         self._dead = outcome.ended
         if outcome.goal:
-            self._score[0 if outcome.goal == T.HOME_SCORED else 1] += 1
+            self._score[0 if outcome.goal == table.HOME_SCORED else 1] += 1
         return outcome.goal, outcome.out_of_table, outcome.stagnated
 
     # ------------------------------------------------------------------ the loop's side

@@ -36,11 +36,11 @@ def _serve(conn: Connection, rods: tuple[str, ...]) -> None:
     # The window gives way to the table, the camera and the loop, which keep the wall clock.
     with contextlib.suppress(OSError, AttributeError):
         os.nice(NICENESS)
-    from foosball_gym import table as T
+    from foosball_gym import table
     from foosball_gym.sim import View
 
     try:
-        view = View([T.rod(name) for name in rods], gui=True)
+        view = View([table.rod(name) for name in rods], gui=True)
     except Exception as err:  # the parent raises it, with its message
         conn.send(("error", str(err)))
         return

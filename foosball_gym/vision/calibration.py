@@ -7,17 +7,17 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.vision.projection import CameraCalibration
 
 #: The playing field's corners (x, y, z): the markers the camera's pose is solved from, in the
 #: order :func:`find_field_corners` returns them (home goal on the image's left).
 FIELD_MARKERS = np.array(
     [
-        [-T.FIELD_HALF_LENGTH, T.FIELD_HALF_WIDTH, 0.0],
-        [T.FIELD_HALF_LENGTH, T.FIELD_HALF_WIDTH, 0.0],
-        [T.FIELD_HALF_LENGTH, -T.FIELD_HALF_WIDTH, 0.0],
-        [-T.FIELD_HALF_LENGTH, -T.FIELD_HALF_WIDTH, 0.0],
+        [-table.FIELD_HALF_LENGTH, table.FIELD_HALF_WIDTH, 0.0],
+        [table.FIELD_HALF_LENGTH, table.FIELD_HALF_WIDTH, 0.0],
+        [table.FIELD_HALF_LENGTH, -table.FIELD_HALF_WIDTH, 0.0],
+        [-table.FIELD_HALF_LENGTH, -table.FIELD_HALF_WIDTH, 0.0],
     ]
 )
 FIELD_HSV = ((40, 80, 40), (85, 255, 255))  # the green playing surface

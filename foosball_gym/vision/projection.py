@@ -8,7 +8,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.camera import CameraModel
 
 
@@ -52,7 +52,7 @@ class CameraCalibration:
         uv, _ = cv2.projectPoints(points, self.rvec, self.tvec, self.K, self.dist)
         return uv.reshape(-1, 2)
 
-    def pixel_to_table(self, uv: np.ndarray, z: float = T.BALL_RADIUS) -> np.ndarray:
+    def pixel_to_table(self, uv: np.ndarray, z: float = table.BALL_RADIUS) -> np.ndarray:
         """Back-project pixels onto the horizontal plane at height ``z``.
 
         Args:

@@ -22,13 +22,15 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from foosball_gym import table as T
+from foosball_gym import table
 from foosball_gym.vision.projection import CameraCalibration
 
-HEAD_TOP_HEIGHT = T.ROD_HEIGHT + T.FIGURINE_HEAD_ABOVE_AXIS
+HEAD_TOP_HEIGHT = table.ROD_HEIGHT + table.FIGURINE_HEAD_ABOVE_AXIS
 AWAY_HSV = ((0, 0, 0), (179, 80, 60))  # near-black and grey: not the shaded brown walls
 # The farthest a figurine's corner gets from its rod's axis as it spins.
-_SWING = math.hypot(T.FIGURINE_SIZE[0] / 2, T.FIGURINE_SIZE[2] - T.FIGURINE_HEAD_ABOVE_AXIS)
+_SWING = math.hypot(
+    table.FIGURINE_SIZE[0] / 2, table.FIGURINE_SIZE[2] - table.FIGURINE_HEAD_ABOVE_AXIS
+)
 # A pixel's corners, to take a blob's extent to the pixels' edges rather than their centres.
 _PIXEL_CORNERS = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
 # Pieces of one blob (a figurine cut in two by its rod) lie this close along the rod.
@@ -56,7 +58,7 @@ class RodTracker:
     def __init__(
         self,
         calibration: CameraCalibration,
-        rods: Sequence[T.Rod],
+        rods: Sequence[table.Rod],
         hsv_low: tuple[int, int, int] = AWAY_HSV[0],
         hsv_high: tuple[int, int, int] = AWAY_HSV[1],
         min_area_px: int = 6,
@@ -70,7 +72,7 @@ class RodTracker:
         self._last: dict[str, float] = {}
         # A figurine's largest side, seen at the height of its head: much bigger blobs are
         # something else (a sleeve, a shadow).
-        _, fy, fz = T.FIGURINE_SIZE
+        _, fy, fz = table.FIGURINE_SIZE
         side = calibration.project(
             np.array(
                 [
@@ -86,9 +88,15 @@ class RodTracker:
         # next to one: the image of each pocket, walls and roof included, is blanked out.
         self._pockets = []
         for sign in (-1.0, 1.0):
-            xs = (sign * T.FIELD_HALF_LENGTH, sign * (T.POCKET_BACK_X + T.WALL_THICKNESS))
-            ys = (-T.GOAL_HALF_WIDTH - T.WALL_THICKNESS, T.GOAL_HALF_WIDTH + T.WALL_THICKNESS)
-            zs = (0.0, T.GOAL_HEIGHT + T.WALL_THICKNESS)
+            xs = (
+                sign * table.FIELD_HALF_LENGTH,
+                sign * (table.POCKET_BACK_X + table.WALL_THICKNESS),
+            )
+            ys = (
+                -table.GOAL_HALF_WIDTH - table.WALL_THICKNESS,
+                table.GOAL_HALF_WIDTH + table.WALL_THICKNESS,
+            )
+            zs = (0.0, table.GOAL_HEIGHT + table.WALL_THICKNESS)
             box = np.array([[x, y, z] for x in xs for y in ys for z in zs])
             hull = cv2.convexHull(calibration.project(box).astype(np.float32))
             self._pockets.append(hull.round().astype(np.int32))
@@ -110,7 +118,7 @@ class RodTracker:
                 centres.append((moments["m10"] / moments["m00"], moments["m01"] / moments["m00"]))
         extents: dict[str, list[tuple[float, float]]] = {rod.name: [] for rod in self.rods}
         if blobs:
-            x = self.calibration.pixel_to_table(np.array(centres), z=T.ROD_HEIGHT)[:, 0]
+            x = self.calibration.pixel_to_table(np.array(centres), z=table.ROD_HEIGHT)[:, 0]
             nearest = np.argmin(np.abs(x[:, None] - self._rod_x), axis=1)
             # A blob's centre lies within the figurine's swing of its rod, give or take what
             # perspective adds for the parts above and below the axis.
@@ -137,7 +145,7 @@ class RodTracker:
         points = np.vstack(corners)
         nadir = self.calibration.centre[1]
         out = []
-        for height in (HEAD_TOP_HEIGHT, T.FIGURINE_FOOT_HEIGHT):
+        for height in (HEAD_TOP_HEIGHT, table.FIGURINE_FOOT_HEIGHT):
             y = self.calibration.pixel_to_table(points, z=height)[:, 1]
             out.append((np.minimum.reduceat(y, starts), np.maximum.reduceat(y, starts)))
         (head_low, head_high), (foot_low, foot_high) = out
@@ -158,7 +166,7 @@ def _merged_centres(extents: list[tuple[float, float]]) -> list[float]:
     return [(low + high) / 2 for low, high in merged]
 
 
-def fit_slide(rod: T.Rod, seen_y: Sequence[float], prior: float | None = None) -> float | None:
+def fit_slide(rod: table.Rod, seen_y: Sequence[float], prior: float | None = None) -> float | None:
     """The slide value that best explains figurines seen at world ``seen_y``.
 
     Each seen figurine may be any of the rod's; for every candidate (a seen figurine taken as

@@ -1,17 +1,16 @@
 """Learning from a teacher while PPO trains (DAgger, for Stable-Baselines3 PPO).
 
-Behaviour cloning before training (:mod:`~foosball_gym.training.sb3.pretrain`) starts the
-learner where the scripted team is, so its first self-play generations are already as good as
-that team and later ones have nothing easy left to beat. A teacher instead labels the states
-the learner itself visits with the scripted action, and the policy's mean is pulled towards
-those labels after every rollout, less and less until ``steps``: the learner starts from
-nothing and grows into a sound player while it plays its own past copies (and, being fitted on
-its own states, learns to recover from its own mistakes, which cloning demonstrations does not
-teach).
-The scripted teacher's kick is a timed lift and swing that switches on the rod's spin; a mean
-fitted to it averages the wind-up and the swing and stalls half-raised, so in keeper against
-keeper its taught means learnt to defend but not to kick a resting ball (README). A trained
-model as the teacher gives labels a policy can fit: its own mean is such a policy.
+Behaviour cloning before training (:mod:`~foosball_gym.training.sb3.pretrain`) starts the learner
+where the scripted team is, so its first self-play generations are already as good as that team and
+later ones have nothing easy left to beat. A teacher instead labels the states the learner itself
+visits with the scripted action, and the policy's mean is pulled towards those labels after every
+rollout, less and less until ``steps``: the learner starts from nothing and grows into a sound
+player while it plays its own past copies (and, being fitted on its own states, learns to recover
+from its own mistakes, which cloning demonstrations does not teach). The scripted teacher's kick is
+a timed lift and swing that switches on the rod's spin; a mean fitted to it averages the wind-up and
+the swing and stalls half-raised, so in keeper against keeper its taught means learnt to defend but
+not to kick a resting ball (docs/results/keeper-vs-keeper.md). A trained model as the teacher gives
+labels a policy can fit: its own mean is such a policy.
 """
 
 from __future__ import annotations

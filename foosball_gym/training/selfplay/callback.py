@@ -1,5 +1,5 @@
-"""Self-play's callback for Stable-Baselines3 (SPEC §4): counts the learner's games, and
-replaces its opponent by a snapshot of it when the rule says the learner beat it
+"""Self-play's callback for Stable-Baselines3 (docs/self-play.md): counts the learner's games,
+and replaces its opponent by a snapshot of it when the rule says the learner beat it
 (:mod:`~foosball_gym.training.selfplay.rule`), optionally behind a gate
 (:mod:`~foosball_gym.training.selfplay.gate`). It keeps the pool of the latest snapshots that
 :class:`~foosball_gym.training.selfplay.opponents.SelfPlayVecEnv` draws from, logs to the SB3
@@ -30,7 +30,7 @@ GATE_LOG = "gate.jsonl"
 
 
 class SelfPlayCallback(BaseCallback):
-    """Replace the opponent by the learner when the learner beats it (SPEC §4).
+    """Replace the opponent by the learner when the learner beats it (docs/self-play.md).
 
     Args:
         window: games the rule judges (100).

@@ -1,5 +1,5 @@
-"""Self-play's opponents in Stable-Baselines3's vectorised envs (SPEC §4): the learner plays
-frozen past copies of itself, chosen outside the env.
+"""Self-play's opponents in Stable-Baselines3's vectorised envs (docs/self-play.md): the learner
+plays frozen past copies of itself, chosen outside the env.
 
 - :class:`OpponentActionWrapper` (per env): the vectorised env, not the env, chooses the
   opponent's action. The env's action becomes ``[learner action, opponent action]`` and its

@@ -1,4 +1,5 @@
-"""When self-play replaces its opponent (SPEC §4), and the learner's rating while it trains.
+"""When self-play replaces its opponent (the paper's rule, docs/self-play.md), and the learner's
+rating while it trains.
 
 Shared by the Stable-Baselines3 callback and the RLlib backend, so both follow one rule.
 Needs neither PyTorch nor either learning library.
