@@ -127,7 +127,7 @@ class ScriptedTeam:
         self._ball = [_find(names, n) for n in ("ball_x", "ball_y", "ball_vx", "ball_vy")]
         names = list(names)
         # The rods' own joint values, where the observation holds them, let a kick wind up.
-        self._own = []
+        self._own: list[tuple[int, int] | None] = []
         for name in rods:
             slide, spin = f"{name}_slide_pos", f"{name}_spin_pos"
             ok = slide in names and spin in names
@@ -145,25 +145,39 @@ class ScriptedTeam:
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         # Python floats: numpy's scalars cost more to compute with than they save.
-        obs = np.asarray(obs).tolist()
-        x, y, vx, vy = (obs[i] for i in self._ball)
-        out = []
+        values: list[float] = np.asarray(obs).tolist()
+        x, y, vx, vy = (values[i] for i in self._ball)
+        out: list[float] = []
         for rod, own in zip(self.rods, self._own):
-            if self.deflect and own is not None:
-                move = self._deflection(rod, float(obs[own[0]]), x, y, vx, vy, obs)
-                if move is not None:
-                    out.extend(move)
-                    continue
-            target = self.target_y(rod, x, y, vx, vy)
-            offset = 0.0
-            if self.aim and self._in_reach(rod, x, vx, vy):
-                offset = offset_for_angle(plan_shot(x, y, self._blocker_positions(obs)))
-                target = y - offset
-            out.append(slide_for(rod, target) / rod.slide_limit)
-            if self.joints == "both":
-                state = None if own is None else (float(obs[own[0]]), float(obs[own[1]]))
-                out.append(self.spin_for(rod, x, y, vx, vy, state, offset) / table.SPIN_LIMIT)
+            out.extend(self.rod_action(rod, own, values, x, y, vx, vy))
         return np.array(out, dtype=np.float32)
+
+    def rod_action(
+        self,
+        rod: table.Rod,
+        own: tuple[int, int] | None,
+        obs: Sequence[float],
+        x: float,
+        y: float,
+        vx: float,
+        vy: float,
+    ) -> tuple[float, ...]:
+        """The action of one rod (its slide, and its spin with ``joints="both"``): ``own`` is
+        where the observation holds its slide and spin positions, if it does."""
+        if self.deflect and own is not None:
+            move = self._deflection(rod, float(obs[own[0]]), x, y, vx, vy, obs)
+            if move is not None:
+                return move
+        target = self.target_y(rod, x, y, vx, vy)
+        offset = 0.0
+        if self.aim and self._in_reach(rod, x, vx, vy):
+            offset = offset_for_angle(plan_shot(x, y, self._blocker_positions(obs)))
+            target = y - offset
+        slide = slide_for(rod, target) / rod.slide_limit
+        if self.joints != "both":
+            return (slide,)
+        state = None if own is None else (float(obs[own[0]]), float(obs[own[1]]))
+        return slide, self.spin_for(rod, x, y, vx, vy, state, offset) / table.SPIN_LIMIT
 
     def _blocker_positions(self, obs: Sequence[float]) -> list[tuple[float, tuple[float, ...]]]:
         """The other team's placed rods: their x and their figurines' y."""
@@ -187,12 +201,7 @@ class ScriptedTeam:
         if path is None:
             return None
         cross, slope = path
-        goal = table.GOAL_LINE_X - rod.x
-        want = math.atan2(-cross, goal)
-        if self._blockers:
-            blockers = self._blocker_positions(obs)
-            if clearance(rod.x, cross, want, blockers) <= 0.0:
-                want = plan_shot(rod.x, cross, blockers)
+        want = self.deflection_aim(rod, cross, obs)
         offset = deflection_offset(math.hypot(vx, vy), math.atan(slope), want)
         if offset is None:
             return None
@@ -202,6 +211,16 @@ class ScriptedTeam:
         command = target + DEFLECT_SLIDE_LEAD * (target - slide)
         command = min(max(command, -rod.slide_limit), rod.slide_limit)
         return command / rod.slide_limit, 0.0
+
+    def deflection_aim(self, rod: table.Rod, cross: float, obs: Sequence[float]) -> float:
+        """The direction (rad from +x) to deflect a ball crossing ``rod``'s line at ``cross``:
+        at the middle of the goal, or past the figurines the observation places."""
+        want = math.atan2(-cross, table.GOAL_LINE_X - rod.x)
+        if self._blockers:
+            blockers = self._blocker_positions(obs)
+            if clearance(rod.x, cross, want, blockers) <= 0.0:
+                want = plan_shot(rod.x, cross, blockers)
+        return want
 
     def _in_reach(self, rod: table.Rod, x: float, vx: float, vy: float) -> bool:
         # Only a ball lying still in front is worth the time a precise line-up takes: one
