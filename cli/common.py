@@ -195,12 +195,35 @@ def show_size(value: Sequence[int]) -> str:
     return "x".join(str(v) for v in value)
 
 
-def scripted(env_id: str, env_kwargs: dict[str, Any], on_table: bool = False) -> Any:
-    """The scripted baseline of an environment (for a table's estimated state: ``on_table``)."""
+def is_scripted(spec: str | None) -> bool:
+    """Whether a policy named on the command line is a scripted one: ``scripted`` or
+    ``scripted:N``."""
+    from foosball_gym.policies.ladder import is_scripted as named
+
+    return named(spec)
+
+
+def scripted_spec(text: str) -> str:
+    """An argument naming a scripted team: ``scripted`` or ``scripted:N``."""
+    from foosball_gym.policies.ladder import parse_scripted
+
+    try:
+        parse_scripted(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+    return text
+
+
+def scripted(
+    env_id: str, env_kwargs: dict[str, Any], on_table: bool = False, spec: str = "scripted"
+) -> Any:
+    """The scripted baseline of an environment, or the rung of its scripted ladder ``spec``
+    names (``scripted:N``); for a table's estimated state: ``on_table``."""
+    from foosball_gym.policies.ladder import parse_scripted
     from foosball_gym.registration import scripted_policy
 
     try:
-        return scripted_policy(env_id, env_kwargs, on_table)
+        return scripted_policy(env_id, env_kwargs, on_table, parse_scripted(spec))
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None
 

@@ -16,10 +16,12 @@ from foosball_gym.cli.common import (
     CliError,
     add_env_arguments,
     check_writable,
+    is_scripted,
     load_model,
     parse_env_kwargs,
     positive_int,
     scripted,
+    scripted_spec,
     seed,
 )
 from foosball_gym.evaluation import evaluate, video_format
@@ -31,13 +33,16 @@ def add_parser(subparsers: Any) -> None:
         "eval",
         help="evaluate a policy on seeded episodes",
         description="Evaluate a trained model (a run dir, a .zip or builtin:NAME)"
-        " or, with --policy scripted, the scripted baseline of ENV_ID.",
+        " or, with --policy scripted, the scripted baseline of ENV_ID (scripted:N: level N of"
+        " its scripted ladder, in the two games).",
     )
     p.add_argument("target", help="MODEL, or ENV_ID with --policy scripted")
     p.add_argument(
         "--policy",
-        choices=["scripted"],
-        help="evaluate the scripted baseline of the environment TARGET",
+        type=scripted_spec,
+        metavar="scripted|scripted:N",
+        help="evaluate the scripted baseline of the environment TARGET, or level N of its "
+        "scripted ladder",
     )
     add_env_arguments(p)
     p.add_argument(
@@ -51,8 +56,9 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument(
         "--opponent",
-        metavar="scripted|MODEL",
-        help="the away side in two-player tasks (default: scripted)",
+        metavar="scripted|scripted:N|MODEL",
+        help="the away side in two-player tasks: the scripted team (the default), level N of "
+        "the scripted ladder, or a model",
     )
     p.add_argument(
         "--json", metavar="FILE.json", help="also write the results here (default: nowhere)"
@@ -105,9 +111,9 @@ def run(args: argparse.Namespace) -> int:
             "only episodes that run can be recorded"
         )
     env_kwargs = parse_env_kwargs(args.env_kwarg)
-    if args.policy == "scripted":
+    if args.policy:
         env_id = args.target
-        policy, name = scripted(env_id, env_kwargs), "scripted"
+        policy, name = scripted(env_id, env_kwargs, spec=args.policy), args.policy
     else:
         loaded = load_model(args.target, args.trust_model)
         env_id = args.env or loaded.env_id
@@ -119,8 +125,9 @@ def run(args: argparse.Namespace) -> int:
         policy, name = loaded, loaded.source
     opponent, opponent_name = None, None
     if args.opponent:
-        if args.opponent == "scripted":
-            opponent_name = "scripted"
+        if is_scripted(args.opponent):
+            # The environment builds it: set_opponent takes the name of a scripted team.
+            opponent, opponent_name = args.opponent, args.opponent
         else:
             opponent = load_model(args.opponent, args.trust_model)
             opponent_name = args.opponent

@@ -10,9 +10,11 @@ from foosball_gym.cli.common import (
     CliError,
     add_trust_argument,
     check_directory,
+    is_scripted,
     load_model,
     parse_env_kwargs,
     positive_int,
+    scripted,
     seed,
 )
 
@@ -26,15 +28,24 @@ def add_parser(subparsers: Any) -> None:
         description="Play every saved generation of a self-play run, its final policy, the "
         "scripted side and any --add MODEL against each other, round-robin, and rate them "
         "(Elo, maximum likelihood, 95 % bootstrap intervals). Prints the table and writes "
-        "league.json and league.png into the run directory (or --out).",
+        "league.json and league.png into the run directory (or --out). Without a run, the "
+        "--add players and the scripted side of --env play (e.g. the scripted ladder: --add "
+        "scripted:0 --add scripted:1 ...).",
     )
-    p.add_argument("run", help="a self-play run directory (foosball train on a two-player task)")
+    p.add_argument(
+        "run",
+        nargs="?",
+        help="a self-play run directory (foosball train on a two-player task); leave it out "
+        "to rate only the --add players and the scripted side of --env",
+    )
+    p.add_argument("--env", metavar="ENV_ID", help="the two-player game of a league without a run")
     p.add_argument(
         "--add",
         action="append",
         default=[],
         metavar="MODEL",
-        help="another player: a run dir, a model .zip or builtin:NAME (repeatable)",
+        help="another player: a run dir, a model .zip, builtin:NAME, or scripted:N (level N of "
+        "the game's scripted ladder) (repeatable)",
     )
     p.add_argument(
         "--games", type=positive_int, default=20, help="games each pair plays (%(default)s)"
@@ -82,17 +93,33 @@ def run(args: argparse.Namespace) -> int:
         write_league,
     )
 
+    if args.run is None:
+        if not args.env or not args.out:
+            raise CliError(
+                "a league without a run directory needs --env ENV_ID (the game) and --out DIR "
+                "(where league.json and league.png go)"
+            )
+    elif args.env:
+        raise CliError(f"--env {args.env}: a run's league plays the run's own game; leave it out")
     out = Path(args.out or args.run)
     if args.out:
         check_directory("--out", out)
     env_overrides = parse_env_kwargs(args.env_kwarg)
-    try:
-        players, config = run_players(
-            args.run, args.generations, trust=args.trust_model, sampled=args.sampled
-        )
-    except ValueError as err:
-        raise CliError(str(err)) from None
+    if args.run is None:
+        players: list[Player] = []
+        config: dict[str, Any] = {"env_id": args.env, "env_kwargs": {}}
+    else:
+        try:
+            players, config = run_players(
+                args.run, args.generations, trust=args.trust_model, sampled=args.sampled
+            )
+        except ValueError as err:
+            raise CliError(str(err)) from None
+    env_kwargs = {**config.get("env_kwargs", {}), **env_overrides}
     for spec in args.add:
+        if is_scripted(spec):
+            players.append(Player(spec, scripted(config["env_id"], env_kwargs, spec=spec)))
+            continue
         loaded = load_model(spec, args.trust_model)
         if args.sampled:
             if not hasattr(loaded.policy, "deterministic"):
@@ -106,7 +133,6 @@ def run(args: argparse.Namespace) -> int:
         torch.manual_seed(args.seed)
     if not args.no_scripted:
         players.append(Player(SCRIPTED, None))
-    env_kwargs = {**config.get("env_kwargs", {}), **env_overrides}
     pairs = len(players) * (len(players) - 1) // 2
     print(
         f"league of {len(players)} players on {config['env_id']}: {pairs} pairs x "

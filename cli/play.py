@@ -13,6 +13,7 @@ from foosball_gym.cli.common import (
     add_env_arguments,
     check_model_fits,
     given,
+    is_scripted,
     load_model,
     parse_env_kwargs,
     positive_int,
@@ -52,7 +53,11 @@ def add_parser(subparsers: Any) -> None:
         "filter, policy, safety layer, CANopen drives. --table sim runs the "
         "same stack against a simulated table on a virtual CAN bus.",
     )
-    p.add_argument("model", help="a run dir, a model .zip, builtin:NAME, or 'scripted'")
+    p.add_argument(
+        "model",
+        help="a run dir, a model .zip, builtin:NAME, 'scripted', or 'scripted:N' (a level of "
+        "the game's scripted ladder)",
+    )
     p.add_argument(
         "--table",
         required=True,
@@ -137,11 +142,12 @@ def add_parser(subparsers: Any) -> None:
 def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
     """The policy to play, with the environment it was trained on."""
     env_kwargs = parse_env_kwargs(args.env_kwarg)
-    if args.model == "scripted":
+    if is_scripted(args.model):
         if not args.env:
             raise CliError("the scripted policy needs --env ENV_ID")
         # A table, simulated or real, is seen through a camera and a filter.
-        return scripted(args.env, env_kwargs, on_table=True), args.env, env_kwargs
+        policy = scripted(args.env, env_kwargs, on_table=True, spec=args.model)
+        return policy, args.env, env_kwargs
     loaded = load_model(args.model, args.trust_model)
     env_id = args.env or loaded.env_id
     if env_id is None:

@@ -92,7 +92,7 @@ def evaluate(
     env_kwargs: dict[str, Any] | None = None,
     episodes: int = 100,
     seed: int = 0,
-    opponent: Policy | None = None,
+    opponent: Policy | str | None = None,
     policy_name: str = "policy",
     opponent_name: str | None = None,
     video: str | Path | None = None,
@@ -105,7 +105,8 @@ def evaluate(
         policy: a callable from one observation to one action.
         env_id: the environment.
         env_kwargs: its options, as keyword arguments of ``gymnasium.make``.
-        opponent: for two-player envs, the away side's policy (None: the env's default).
+        opponent: for two-player envs, the away side's policy (None: the env's default;
+            ``"scripted:N"``: rung N of the game's scripted ladder).
         video: write the first ``video_episodes`` episodes, rendered, one after the other
             into this file: .mp4 or .gif, by its suffix. Frames are 640 x 360 unless
             ``env_kwargs`` give ``render_width`` and ``render_height``.
@@ -141,7 +142,7 @@ def evaluate(
     writer = None
     try:
         _check_fits(policy, policy_name, env_id, env)
-        if opponent is not None:
+        if opponent is not None and not isinstance(opponent, str):
             _check_fits(opponent, opponent_name or "opponent", env_id, env)
         if video is not None:
             writer = open_video(video, env.metadata["render_fps"], video_stride)
@@ -149,7 +150,11 @@ def evaluate(
         env.close()
         raise
     if opponent is not None:
-        env.unwrapped.set_opponent(opponent)
+        try:
+            env.unwrapped.set_opponent(opponent)
+        except Exception:
+            env.close()
+            raise
     rewards, lengths = [], []
     successes = goals_for = goals_against = 0
     try:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from foosball_gym import table
-from foosball_gym.policies.scripted import ScriptedTeam
+from foosball_gym.policies.ladder import is_scripted, parse_scripted
 from foosball_gym.policy_io.observations import mirrored_builder
 from foosball_gym.policy_io.task import Joint, TaskInterface, action_joints, check_action
 from foosball_gym.tasks.base import Start, Task, clear_of_ball
@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
 Policy = Callable[[np.ndarray], Any]
 
-# A ball slower than this (m/s) counts as lying still for the stagnation rule.
+# A ball slower than this (m/s) counts as lying still for the stagnation and dead-ball rules.
 STILL_SPEED = 0.05
 # Serves drawn in a running game until one leaves every figurine clear of the ball.
 SERVE_TRIES = 20
@@ -41,7 +41,8 @@ class Outcome:
 
     @property
     def ended(self) -> bool:
-        """Whether the ball is dead: a goal, off the table, or lying still too long."""
+        """Whether the ball is dead: a goal, off the table, or lying still too long (or out of
+        every figurine's reach)."""
         return self.goal != 0 or self.out_of_table or self.stagnated
 
 
@@ -53,8 +54,10 @@ class Game:
         interface: the learner's observation builder and action mapping for the task.
         sim: the simulated table, holding exactly ``task.layout.rods``.
         opponent: the away side's policy, a callable from the mirrored observation to an
-            action (tasks with an opponent only; ``None``: the scripted team).
-        stagnation_steps: a ball still for this many steps is dead (0: never).
+            action (tasks with an opponent only; ``None``: the scripted team; ``"scripted:N"``:
+            rung N of the task's scripted ladder).
+        stagnation_steps: a ball still for this many steps is dead (0: never). So is one still
+            out of every figurine's reach for the task's ``dead_ball_steps``.
 
     Attributes:
         positions, velocities: joint values of the rods in play, all slides then all spins,
@@ -69,7 +72,7 @@ class Game:
         interface: TaskInterface,
         sim: TableSim,
         *,
-        opponent: Policy | None = None,
+        opponent: Policy | str | None = None,
         stagnation_steps: int = 0,
     ) -> None:
         layout = task.layout
@@ -79,6 +82,7 @@ class Game:
             raise ValueError(f"{type(task).__name__} has no opponent to set")
         self.task, self.interface, self.sim = task, interface, sim
         self.stagnation_steps = int(stagnation_steps)
+        self.dead_ball_steps = int(task.dead_ball_steps)
         self.rods = [table.rod(name) for name in layout.rods]
         n = len(self.rods)
         self._index = {
@@ -101,7 +105,7 @@ class Game:
         self.velocities: list[float] = [0.0] * (2 * n)
         self.ball = (0.0, 0.0, 0.0, 0.0)
         self.goals_for = self.goals_against = 0
-        self._still_steps = 0
+        self._still_steps = self._dead_steps = 0
 
     # ------------------------------------------------------------------ serving
 
@@ -131,7 +135,7 @@ class Game:
 
     def _begin(self) -> None:
         self.goals_for = self.goals_against = 0
-        self._still_steps = 0
+        self._still_steps = self._dead_steps = 0
         self.read_state()
 
     # ------------------------------------------------------------------ the opponent
@@ -140,19 +144,28 @@ class Game:
     def opponent(self) -> Policy | None:
         return self._opponent
 
-    def set_opponent(self, policy: Policy | None) -> None:
-        """Set the away side's policy; ``None`` restores the scripted team."""
+    def set_opponent(self, policy: Policy | str | None) -> None:
+        """Set the away side's policy; ``None`` or ``"scripted"`` is the task's scripted team,
+        ``"scripted:N"`` rung N of its scripted ladder."""
         if self._opp_builder is None:
             raise ValueError(f"{type(self.task).__name__} has no opponent to set")
-        if policy is not None and not callable(policy):
-            raise ValueError(f"an opponent must be a callable obs -> action, got {policy!r}")
+        if isinstance(policy, str) and is_scripted(policy):
+            policy = self.scripted_opponent(parse_scripted(policy))
+        elif policy is not None and not callable(policy):
+            raise ValueError(
+                "an opponent must be a callable obs -> action, 'scripted' or 'scripted:N', "
+                f"got {policy!r}"
+            )
         self._opponent = self.scripted_opponent() if policy is None else policy
 
-    def scripted_opponent(self) -> ScriptedTeam:
-        """A scripted team for the away side, acting on its mirrored observation."""
+    def scripted_opponent(self, level: int | None = None) -> Policy:
+        """A scripted team for the away side, acting on its mirrored observation: the task's
+        scripted baseline, or rung ``level`` of its ladder."""
         if self._opp_builder is None:
             raise ValueError(f"{type(self.task).__name__} has no opponent")
-        return ScriptedTeam(self._opp_builder.names, self._opp_builder.own, self.task.layout.joints)
+        # The mirrored observation is laid out as the home side's, so a team built on the
+        # home side's names plays the away rods of the same roles.
+        return self.task.scripted_level(level, list(self.interface.builder.names))
 
     def opponent_observation(self) -> np.ndarray:
         """What the opponent sees now: the mirrored observation."""
@@ -207,11 +220,21 @@ class Game:
         return Outcome(goal, out, self._stagnated())
 
     def _stagnated(self) -> bool:
-        if not self.stagnation_steps:
+        if not (self.stagnation_steps or self.dead_ball_steps):
             return False
-        _, _, vx, vy = self.ball
-        self._still_steps = self._still_steps + 1 if vx * vx + vy * vy < STILL_SPEED**2 else 0
-        return self._still_steps >= self.stagnation_steps
+        x, y, vx, vy = self.ball
+        if vx * vx + vy * vy >= STILL_SPEED**2:
+            self._still_steps = self._dead_steps = 0
+            return False
+        self._still_steps += 1
+        if self.dead_ball_steps and not any(table.within_reach(r, x, y) for r in self.rods):
+            self._dead_steps += 1
+        else:
+            self._dead_steps = 0
+        return bool(
+            (self.stagnation_steps and self._still_steps >= self.stagnation_steps)
+            or (self.dead_ball_steps and self._dead_steps >= self.dead_ball_steps)
+        )
 
     @property
     def success(self) -> bool:

@@ -139,20 +139,26 @@ def task_interface(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> 
 
 
 def scripted_policy(
-    env_id: str, env_kwargs: Mapping[str, Any] | None = None, on_table: bool = False
+    env_id: str,
+    env_kwargs: Mapping[str, Any] | None = None,
+    on_table: bool = False,
+    level: int | None = None,
 ) -> Any:
     """The scripted baseline of the environment ``env_id`` with options ``env_kwargs``, for
     the environment's state or, with ``on_table``, for a table's camera and filter (as with
-    ``estimated_state=True``).
+    ``estimated_state=True``); ``level``: rung ``level`` of its scripted ladder instead
+    (:mod:`foosball_gym.policies.ladder`).
 
     Raises:
-        ValueError: ``env_id`` is not registered, or an option has a bad value.
+        ValueError: ``env_id`` is not registered, an option has a bad value, or the
+            environment has no such level.
         TypeError: an option the environment does not take.
     """
     check_env_id(env_id)
     task, options = make_task(env_id, env_kwargs)
     precise = not (on_table or options["estimated_state"])
-    return task.scripted_policy(interface_of(task, options).builder.names, precise)
+    names = list(interface_of(task, options).builder.names)
+    return task.scripted_level(level, names, precise)
 
 
 def describe_envs() -> str:

@@ -96,6 +96,10 @@ ROLLING_RESISTANCE = 0.01
 BALL_LIMIT_X = FIELD_HALF_LENGTH - BALL_RADIUS
 BALL_LIMIT_Y = FIELD_HALF_WIDTH - BALL_RADIUS
 GOAL_MOUTH_HALF = GOAL_HALF_WIDTH - BALL_RADIUS
+# How far along x from a rod's axis a figurine's sole reaches a ball lying on the table: the
+# sole swings FIGURINE_REACH from the axis and the ball's centre lies ROD_HEIGHT - BALL_RADIUS
+# below it (a resting ball 0.065 m in front of a rod is not touched by a full swing).
+FOOT_REACH_X = math.sqrt((FIGURINE_REACH + BALL_RADIUS) ** 2 - (ROD_HEIGHT - BALL_RADIUS) ** 2)
 
 
 @dataclass(frozen=True)
@@ -269,6 +273,19 @@ def rod(name: str) -> Rod:
         return ROD_BY_NAME[name]
     except KeyError:
         raise ValueError(f"unknown rod {name!r}; allowed: {', '.join(ROD_BY_NAME)}") from None
+
+
+def within_reach(rod: Rod, x: float, y: float) -> bool:
+    """Whether a figurine of ``rod``, slid anywhere along its range, can touch a ball lying at
+    (x, y): the table's rules serve again a ball at rest that none can."""
+    if abs(x - rod.x) > FOOT_REACH_X:
+        return False
+    side = FIGURINE_LEG_HALF_WIDTH + BALL_RADIUS
+    for off in rod.figurine_offsets:
+        low, high = sorted(rod.direction * (s + off) for s in (-rod.slide_limit, rod.slide_limit))
+        if low - side <= y <= high + side:
+            return True
+    return False
 
 
 def in_goal_opening(y: float) -> bool:

@@ -134,7 +134,7 @@ def test_figurine_observation_follows_the_rod(make_env):
         ("Foosball-Block-v0", {"opponent_prismatic_only": True}, "only to tasks with an opponent"),
         ("Foosball-FullGame-v0", {"continuous": 1}, "True or False"),
         ("Foosball-KeeperVsKeeper-v0", {"stagnation_steps": -1}, "non-negative"),
-        ("Foosball-KeeperVsKeeper-v0", {"opponent": "scripted"}, "callable"),
+        ("Foosball-KeeperVsKeeper-v0", {"opponent": "builtin:keeper-vs-keeper"}, "callable"),
         ("Foosball-Score-v0", {"residual": -0.1}, r"residual must be a number in \[0, 2.0\]"),
         ("Foosball-Block-v0", {"residual": "much"}, "residual must be a number"),
     ],

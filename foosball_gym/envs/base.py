@@ -22,7 +22,6 @@ from foosball_gym.envs.estimated import CameraNoise, EstimatedState
 from foosball_gym.envs.options import RENDER_MODES
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
 from foosball_gym.game import Game, Policy
-from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.observations import check_flag, observation_options
 from foosball_gym.policy_io.task import TaskInterface, check_action, residual_action
 from foosball_gym.tasks.base import Task, check_ball_position, check_pair
@@ -69,7 +68,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
 
     - `opponent`: the away side's policy, a callable from the mirrored observation (the game
       as the away side sees it from its own goal) to an action in [-1, 1]; `None` is the
-      scripted team. `set_opponent(policy)` swaps it between episodes.
+      scripted team, the top of the game's scripted ladder, and `"scripted:N"` its rung N
+      (`foosball_gym.policies.ladder`). `set_opponent(policy)` swaps it between episodes.
     - `stagnation_steps`: end the game as a draw once the ball has lain still (slower than
       5 cm/s) for this many steps; 0 never does.
 
@@ -149,7 +149,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self,
         task: Task,
         *,
-        opponent: Policy | None,
+        opponent: Policy | str | None,
         goal_reward: float,
         out_of_table_penalty: float,
         ball_to_goal_weight: float,
@@ -254,12 +254,14 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise
         self._last_render = 0.0
         self._started = False
+        self._elapsed = 0
+        self._match_steps: int | None = None
 
     # ------------------------------------------------------------------ policies
 
-    def scripted_policy(self) -> ScriptedTeam:
+    def scripted_policy(self) -> Policy:
         """The scripted baseline for the learner's side of this task."""
-        return self.task.scripted_policy(self.obs_builder.names, self._estimated is None)
+        return self.task.scripted_policy(list(self.obs_builder.names), self._estimated is None)
 
     def success(self, goals_for: int, goals_against: int) -> bool:
         """Whether the task is met with this score so far."""
@@ -269,20 +271,28 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     def opponent(self) -> Policy | None:
         return self.game.opponent
 
-    def set_opponent(self, policy: Policy | None) -> None:
+    def set_opponent(self, policy: Policy | str | None) -> None:
         """Set the policy that plays the away side: a callable from the mirrored observation
-        (the game as the away side sees it from its own goal) to an action in [-1, 1].
-        ``None`` restores the scripted default."""
+        (the game as the away side sees it from its own goal) to an action in [-1, 1], or
+        ``"scripted:N"``, rung N of the game's scripted ladder. ``None`` (or ``"scripted"``)
+        restores the scripted default, the top of the ladder."""
         if not self.layout.opponent:
             raise ValueError(f"{type(self).__name__} has no opponent to set")
         self.game.set_opponent(policy)
 
-    def scripted_opponent(self) -> ScriptedTeam:
-        """A scripted team for the away side (the default opponent), acting on the mirrored
-        observation."""
+    def scripted_opponent(self, level: int | None = None) -> Policy:
+        """A scripted team for the away side, acting on the mirrored observation: the default
+        opponent, or rung ``level`` of the game's scripted ladder."""
         if not self.layout.opponent:
             raise ValueError(f"{type(self).__name__} has no opponent")
-        return self.game.scripted_opponent()
+        return self.game.scripted_opponent(level)
+
+    def scripted_level(self, level: int | None) -> Policy:
+        """Rung ``level`` of the game's scripted ladder for the learner's side (None: the
+        scripted baseline, as :meth:`scripted_policy`)."""
+        return self.task.scripted_level(
+            level, list(self.obs_builder.names), self._estimated is None
+        )
 
     def opponent_observation(self) -> np.ndarray:
         """What the opponent sees now: the mirrored observation."""
@@ -316,6 +326,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             self._estimated.rng = self.np_random
         self._start(self.task.sample_start(self.np_random, ball_position, ball_velocity, options))
         self._started = True
+        self._elapsed = 0
+        self._match_steps = self.task.match_steps(self.sim.control_hz)
         obs = self._last_obs = self._observe()
         info = {"goal": 0, "is_success": self.game.success, **self._score_info()}
         if dynamics:
@@ -373,6 +385,11 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
                 self.dt, game.ball, game.positions, self.sim.figurine_positions()
             )
         continuous = outcome.ended and self.task.continues_after_goal
+        # A match's rules end it: a side has its first_to goals, or its time is up.
+        decided = continuous and self.task.match_over(game.goals_for, game.goals_against)
+        self._elapsed += 1
+        time_up = self._match_steps is not None and self._elapsed >= self._match_steps
+        terminated = outcome.ended and (not continuous or decided)
         terms = self._rewards.step(
             outcome.goal,
             outcome.out_of_table,
@@ -380,7 +397,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             game.ball[0],
             game.ball[1],
             act,
-            outcome.ended and not continuous,
+            terminated,
         )
         info = {
             "goal": outcome.goal,
@@ -391,14 +408,14 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         }
         for name in TERMS:
             info["reward_" + name] = terms[name]
-        if continuous:
+        if continuous and not decided:
             goals = game.goals_for, game.goals_against
             self._start(self.task.sample_start(self.np_random))
             game.goals_for, game.goals_against = goals
         obs = self._last_obs = self._observe()
         if self.render_mode == "human":
             self.render()
-        return obs, float(sum(terms.values())), outcome.ended and not continuous, False, info
+        return obs, float(sum(terms.values())), terminated, time_up and not terminated, info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode == "rgb_array":

@@ -44,32 +44,57 @@ class FullGameEnv(FoosballEnv):
     vx ~ ±U(0.25, 1) and |vy| ~ U(1, 2) m/s. All rods centred, feet down.
 
     ## Episode End
-    Terminated on a goal, when the ball leaves the table, or as a draw when it has lain still
-    for `stagnation_steps` (60); truncated after 3600 steps (one minute). With
-    `continuous=True` none of these ends the episode: the ball is served again and the score
-    runs on (`info["goals_for"]`, `info["goals_against"]`) until the time limit, for
-    evaluating whole matches; `is_success` is then "ahead on goals".
+    Terminated on a goal, when the ball leaves the table, or as a draw on a dead ball: one
+    lying still for `stagnation_steps` (60), or at rest out of every figurine's reach for
+    `dead_ball_steps` (30); truncated after 3600 steps (one minute). With `continuous=True`
+    none of these ends the episode: the ball is served again and the score runs on
+    (`info["goals_for"]`, `info["goals_against"]`) until the time limit (or `match_seconds`,
+    or a side's `first_to` goals), for evaluating whole matches; `is_success` is then "ahead
+    on goals".
+
+    A rod turns at most two turns in all, one either way from its figurines hanging down
+    (the revolute target is ±2π rad): the rules forbid spinning a rod, and the drive's stop
+    holds it there.
 
     ## Arguments
     - `continuous`: play a match of many serves instead of one: a goal or a dead ball serves
       again, and success is being ahead at the time limit.
+    - `first_to`: with `continuous=True`, the match ends (terminated) as soon as a side has
+      scored this many goals; 0 plays on until time is up.
+    - `match_seconds`: with `continuous=True`, the match's length in seconds of play: it ends
+      then (truncated, as a time limit does). `None` plays until the time limit. The time
+      limit ends an episode all the same, so a match longer than the registered one needs
+      it raised: `gymnasium.make(..., max_episode_steps=N)`.
+    - `dead_ball_steps`: a ball at rest (slower than 5 cm/s) where no figurine in play can
+      reach it, whatever the rods' slides, is dead after this many steps: served again in a
+      match, a draw in a single serve, as the table's rules have it
+      (`foosball_gym.table.within_reach`; `info["stagnated"]` says so). 0: never.
 
     The other arguments are those every environment takes, described under
     [FoosballEnv][foosball_gym.envs.base.FoosballEnv]; `opponent` defaults to the scripted
-    team.
+    team, the top of the scripted ladder (`foosball_gym.policies.ladder`; `"scripted:N"`
+    names a level).
 
     ## Version History
     - v0: first version.
     - v0, physics revision 2: the faithful table (the documentation's "The simulated table");
       `control_hz` replaces `substeps`.
     - v0: the options are the class's keyword arguments.
+    - v0: `first_to`, `match_seconds` and `dead_ball_steps` (on by default: a ball at rest
+      out of reach is served again after half a second instead of a second); the scripted
+      team is the top of a ladder of levels (`scripted:N`).
     """
 
     def __init__(
         self,
         *,
         continuous: bool = False,
-        opponent: Policy | None = None,
+        first_to: int = 0,
+        match_seconds: float | None = None,
+        # Half a second at rest out of reach: a rolling ball slower than 5 cm/s covers at most
+        # 2.5 cm, less than the gap between two rods' reaches.
+        dead_ball_steps: int = 30,
+        opponent: Policy | str | None = None,
         goal_reward: float = 1000.0,
         out_of_table_penalty: float = 1000.0,
         ball_to_goal_weight: float = 0.0,
@@ -101,6 +126,9 @@ class FullGameEnv(FoosballEnv):
         super().__init__(
             FullGameTask(
                 continuous=continuous,
+                first_to=first_to,
+                match_seconds=match_seconds,
+                dead_ball_steps=dead_ball_steps,
             ),
             opponent=opponent,
             goal_reward=goal_reward,

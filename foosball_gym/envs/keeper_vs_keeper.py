@@ -48,22 +48,37 @@ class KeeperVsKeeperEnv(FoosballEnv):
     y ~ U(-0.1, 0.1). Both keepers start centred (or just beside the ball).
 
     ## Episode End
-    Terminated on a goal, when the ball leaves the table, or as a draw when the ball has lain
-    still for `stagnation_steps` (60, one second); truncated after 1800 steps (30 s).
+    Terminated on a goal, when the ball leaves the table, or as a draw on a dead ball: one
+    that has lain still for `stagnation_steps` (60, one second), or at rest out of both
+    keepers' reach for `dead_ball_steps` (30); truncated after 1800 steps (30 s).
     With `continuous=True` none of these ends the episode: the ball is served again (the
-    keepers centred, the ball in front of either) and the score runs on for the whole 30 s;
-    success is being ahead then. Two sound keepers mostly draw a single serve; a match gives
-    each many chances.
+    keepers centred, the ball in front of either) and the score runs on for the whole 30 s
+    (or `match_seconds`, or until a side has `first_to` goals); success is being ahead then.
+    Two sound keepers mostly draw a single serve; a match gives each many chances.
     `info`: `is_success` (the learner scored), `goal`, `goals_for`,
     `goals_against`, `stagnated`.
+
+    A keeper turns at most two turns in all, one either way from its figurine hanging down
+    (the revolute target is ±2π rad): the rules forbid spinning a rod.
 
     ## Arguments
     - `continuous`: play a match of many serves instead of one: a goal or a dead ball serves
       again, and success is being ahead at the time limit.
+    - `first_to`: with `continuous=True`, the match ends (terminated) as soon as a side has
+      scored this many goals; 0 plays on until time is up.
+    - `match_seconds`: with `continuous=True`, the match's length in seconds of play: it ends
+      then (truncated, as a time limit does). `None` plays until the time limit. The time
+      limit ends an episode all the same, so a match longer than the registered one needs
+      it raised: `gymnasium.make(..., max_episode_steps=N)`.
+    - `dead_ball_steps`: a ball at rest (slower than 5 cm/s) where no figurine in play can
+      reach it, whatever the rods' slides, is dead after this many steps: served again in a
+      match, a draw in a single serve, as the table's rules have it
+      (`foosball_gym.table.within_reach`; `info["stagnated"]` says so). 0: never.
 
     The other arguments are those every environment takes, described under
     [FoosballEnv][foosball_gym.envs.base.FoosballEnv]; `opponent` defaults to the scripted
-    keeper.
+    keeper, the top of the scripted ladder (`foosball_gym.policies.ladder`; `"scripted:N"`
+    names a level).
 
     ## Version History
     - v0: first version.
@@ -71,13 +86,21 @@ class KeeperVsKeeperEnv(FoosballEnv):
       `control_hz` replaces `substeps`.
     - v0: `continuous`, a match of many serves.
     - v0: the options are the class's keyword arguments.
+    - v0: `first_to`, `match_seconds` and `dead_ball_steps` (on by default: a ball at rest
+      out of both keepers' reach is served again after half a second instead of a second);
+      the scripted keeper is the top of a ladder of levels (`scripted:N`).
     """
 
     def __init__(
         self,
         *,
         continuous: bool = False,
-        opponent: Policy | None = None,
+        first_to: int = 0,
+        match_seconds: float | None = None,
+        # Half a second at rest out of reach: a rolling ball slower than 5 cm/s covers at most
+        # 2.5 cm, less than the gap between two rods' reaches.
+        dead_ball_steps: int = 30,
+        opponent: Policy | str | None = None,
         goal_reward: float = 1000.0,
         out_of_table_penalty: float = 1000.0,
         ball_to_goal_weight: float = 0.0,
@@ -110,6 +133,9 @@ class KeeperVsKeeperEnv(FoosballEnv):
         super().__init__(
             KeeperVsKeeperTask(
                 continuous=continuous,
+                first_to=first_to,
+                match_seconds=match_seconds,
+                dead_ball_steps=dead_ball_steps,
             ),
             opponent=opponent,
             goal_reward=goal_reward,

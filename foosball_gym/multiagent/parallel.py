@@ -72,8 +72,9 @@ class FoosballParallelEnv(ParallelEnv):
 
     ## Episode End
     Both agents together: terminated as the single-agent env is (a goal, the ball off the
-    table, a dead ball; never with ``continuous=True``), truncated after ``max_cycles`` steps
-    (the registered ``max_episode_steps``). ``infos[agent]``: ``goal`` (+1: this agent
+    table, a dead ball; with ``continuous=True`` only when a side has its ``first_to`` goals),
+    truncated after ``max_cycles`` steps (the registered ``max_episode_steps``) or the match's
+    ``match_seconds``. ``infos[agent]``: ``goal`` (+1: this agent
     scored), ``is_success``, ``goals_for``, ``goals_against`` (from the agent's side),
     ``out_of_table``, ``stagnated`` and the reward terms.
 
@@ -110,6 +111,15 @@ class FoosballParallelEnv(ParallelEnv):
         self.max_cycles = int(max_cycles)
         env = load_env_creator(spec.entry_point)(**{**spec.kwargs, **env_kwargs})
         self._env: FoosballEnv = env
+        # A match's own length ends it sooner (the limit caps it: a longer one is refused).
+        match = env.task.match_steps(env.sim.control_hz)
+        if match is not None and match > self.max_cycles:
+            env.close()
+            raise ValueError(
+                f"match_seconds={env.task.match_seconds} is {match} steps, longer than "
+                f"max_cycles={self.max_cycles}: give max_cycles={match} or more"
+            )
+        self._match_steps = self.max_cycles if match is None else match
         self._closed = False
         layout = env.layout
         self.possible_agents = list(AGENTS)
@@ -202,7 +212,9 @@ class FoosballParallelEnv(ParallelEnv):
         game.command(act["home"], act["away"])
         outcome = game.advance()
         continuous = outcome.ended and env.task.continues_after_goal
-        terminal = outcome.ended and not continuous
+        # A first-to-N match is over once a side has its goals.
+        decided = continuous and env.task.match_over(game.goals_for, game.goals_against)
+        terminal = outcome.ended and (not continuous or decided)
         self._steps += 1
         x, y = game.ball[0], game.ball[1]
         positions = game.positions
@@ -237,7 +249,7 @@ class FoosballParallelEnv(ParallelEnv):
         infos = {"home": home_info, "away": self._away_info(home_info)}
         for agent in AGENTS:
             infos[agent].update({"reward_" + name: terms[agent][name] for name in TERMS})
-        if continuous:
+        if continuous and not decided:
             goals = game.goals_for, game.goals_against
             game.start(env.task.sample_start(env.np_random))
             self._reset_rewards()
@@ -247,7 +259,7 @@ class FoosballParallelEnv(ParallelEnv):
             "away": game.opponent_observation(),
         }
         rewards = {agent: float(sum(terms[agent].values())) for agent in AGENTS}
-        truncated = self._steps >= self.max_cycles
+        truncated = self._steps >= self._match_steps
         terminations = dict.fromkeys(AGENTS, terminal)
         truncations = dict.fromkeys(AGENTS, truncated)
         if terminal or truncated:

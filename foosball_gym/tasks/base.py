@@ -14,6 +14,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from foosball_gym import table
+from foosball_gym.policies.ladder import Level, Policy, level_of
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.task import Layout
 
@@ -84,6 +85,11 @@ class Task:
     reset_options: ClassVar[tuple[str, ...]] = ("ball_position", "ball_velocity")
     #: True where a goal (or a dead ball) re-serves instead of ending the episode.
     continues_after_goal: bool = False
+    #: A ball still this many steps where no figurine in play can reach it is dead (0: never).
+    dead_ball_steps: int = 0
+    #: The game's scripted teams, weakest first (:mod:`foosball_gym.policies.ladder`); the
+    #: last is its scripted baseline. Empty for a task with one scripted policy.
+    ladder: ClassVar[tuple[Level, ...]] = ()
 
     def sample_start(
         self,
@@ -99,10 +105,36 @@ class Task:
         """Whether the task is met with this score so far."""
         raise NotImplementedError
 
-    def scripted_policy(self, names: list[str], precise_state: bool = True) -> ScriptedTeam:
+    def match_over(self, goals_for: int, goals_against: int) -> bool:
+        """Whether a match that goes on after goals is decided by this score (a first-to-N
+        match); a task that ends at its first goal never is."""
+        return False
+
+    def match_steps(self, control_hz: int) -> int | None:
+        """The control steps a match that goes on after goals lasts, if the task sets its
+        length (None: until the time limit)."""
+        return None
+
+    def scripted_policy(self, names: list[str], precise_state: bool = True) -> Policy:
         """The scripted baseline for the learner's side, on observations with ``names``.
 
         ``precise_state``: the observation is the simulator's own state, not an estimate from a
         camera (``estimated_state``, a real or simulated table), so skills that need the ball's
         path to a millimetre may be used."""
+        if self.ladder:
+            return self.ladder[-1].make(names, self.layout.controlled, precise_state)
         return ScriptedTeam(names, self.layout.controlled, self.layout.joints)
+
+    def scripted_level(
+        self, level: int | None, names: list[str], precise_state: bool = True
+    ) -> Policy:
+        """The scripted team of rung ``level`` of the task's ladder for the learner's side
+        (None: its scripted baseline, the top), on observations with ``names``.
+
+        Raises:
+            ValueError: the task has no such level (the message names those it has).
+        """
+        if level is None:
+            return self.scripted_policy(names, precise_state)
+        game = type(self).__name__.removesuffix("Task")
+        return level_of(self.ladder, level, game).make(names, self.layout.controlled, precise_state)

@@ -7,18 +7,32 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table
-from foosball_gym.policy_io.observations import check_flag
+from foosball_gym.policies.ladder import FULL_GAME_LADDER
 from foosball_gym.policy_io.task import Layout
-from foosball_gym.tasks.base import Start, Task
+from foosball_gym.tasks.base import Start
+from foosball_gym.tasks.match import GameTask
 
 
-class FullGameTask(Task):
+class FullGameTask(GameTask):
     """All eight rods; a kick-off from a side wall. Success is scoring (in a continuous match:
     being ahead)."""
 
-    def __init__(self, *, continuous: bool = False) -> None:
-        self.continuous = check_flag("continuous", continuous)
-        self.continues_after_goal = self.continuous
+    ladder = FULL_GAME_LADDER
+
+    def __init__(
+        self,
+        *,
+        continuous: bool = False,
+        first_to: int = 0,
+        match_seconds: float | None = None,
+        dead_ball_steps: int = 30,
+    ) -> None:
+        super().__init__(
+            continuous=continuous,
+            first_to=first_to,
+            match_seconds=match_seconds,
+            dead_ball_steps=dead_ball_steps,
+        )
         home = tuple(r.name for r in table.team_rods(table.HOME))
         away = tuple(r.name for r in table.team_rods(table.AWAY))
         self.layout = Layout(controlled=home, joints="both", opponent=away)
@@ -39,8 +53,3 @@ class FullGameTask(Task):
         if ball_velocity is not None:
             velocity = ball_velocity
         return Start([0.0] * 8, [0.0] * 8, position, velocity)
-
-    def success(self, goals_for: int, goals_against: int) -> bool:
-        if self.continuous:
-            return goals_for > goals_against
-        return goals_for > 0

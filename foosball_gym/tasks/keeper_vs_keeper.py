@@ -7,21 +7,35 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table
-from foosball_gym.policy_io.observations import check_flag
+from foosball_gym.policies.ladder import KEEPER_LADDER
 from foosball_gym.policy_io.task import Layout
-from foosball_gym.tasks.base import Start, Task
+from foosball_gym.tasks.base import Start
+from foosball_gym.tasks.match import GameTask
 from foosball_gym.tasks.serves import resting_in_front_of
 
 
-class KeeperVsKeeperTask(Task):
+class KeeperVsKeeperTask(GameTask):
     """The two keepers; the ball starts at rest in front of one. Success is scoring (in a
     continuous match: being ahead)."""
 
-    def __init__(self, *, continuous: bool = False) -> None:
+    ladder = KEEPER_LADDER
+
+    def __init__(
+        self,
+        *,
+        continuous: bool = False,
+        first_to: int = 0,
+        match_seconds: float | None = None,
+        dead_ball_steps: int = 30,
+    ) -> None:
         # A match of many serves: two sound keepers rarely score, so one serve a game leaves
         # most games drawn and tells little about which keeper is better.
-        self.continuous = check_flag("continuous", continuous)
-        self.continues_after_goal = self.continuous
+        super().__init__(
+            continuous=continuous,
+            first_to=first_to,
+            match_seconds=match_seconds,
+            dead_ball_steps=dead_ball_steps,
+        )
         self.layout = Layout(controlled=("home_keeper",), joints="both", opponent=("away_keeper",))
 
     def sample_start(
@@ -37,8 +51,3 @@ class KeeperVsKeeperTask(Task):
             position = ball_position
         velocity = (0.0, 0.0) if ball_velocity is None else ball_velocity
         return Start([0.0, 0.0], [0.0, 0.0], position, velocity)
-
-    def success(self, goals_for: int, goals_against: int) -> bool:
-        if self.continuous:
-            return goals_for > goals_against
-        return goals_for > 0
