@@ -62,6 +62,10 @@ class EvalResult:
     mean_reward: float
     std_reward: float
     mean_length: float
+    # Balls put in play (a match serves again after each goal and dead ball) and how many of
+    # them left the table.
+    serves: int = 0
+    off_table: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -82,6 +86,10 @@ class EvalResult:
             ("mean reward", f"{self.mean_reward:.1f} ± {self.std_reward:.1f}"),
             ("mean episode length", f"{self.mean_length:.1f} steps"),
         ]
+        if self.serves > self.episodes or self.off_table:
+            share = 100 * self.off_table / max(self.serves, 1)
+            rows.append(("serves", str(self.serves)))
+            rows.append(("off the table", f"{self.off_table} ({share:.1f} % of serves)"))
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
@@ -156,7 +164,7 @@ def evaluate(
             env.close()
             raise
     rewards, lengths = [], []
-    successes = goals_for = goals_against = 0
+    successes = goals_for = goals_against = serves = off_table = 0
     try:
         for i in range(episodes):
             obs, info = env.reset(seed=seed + i)
@@ -164,11 +172,15 @@ def evaluate(
             if record:
                 writer.add(env.render)
             total, steps, done = 0.0, 0, False
+            serves += 1
             while not done:
                 obs, reward, terminated, truncated, info = env.step(policy(obs))
                 total += reward
                 steps += 1
                 done = terminated or truncated
+                off_table += bool(info.get("out_of_table"))
+                ended = info["goal"] or info.get("out_of_table") or info.get("stagnated")
+                serves += bool(ended) and not done
                 if record:
                     writer.add(env.render)
             if record:
@@ -206,6 +218,8 @@ def evaluate(
         mean_reward=float(np.mean(rewards)),
         std_reward=float(np.std(rewards)),
         mean_length=float(np.mean(lengths)),
+        serves=serves,
+        off_table=off_table,
     )
 
 

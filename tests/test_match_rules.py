@@ -157,3 +157,22 @@ def test_the_two_player_game_keeps_the_match_rules():
         game.close()
     with pytest.raises(ValueError, match="max_cycles=3000 or more"):
         parallel_env("Foosball-KeeperVsKeeper-v0", continuous=True, match_seconds=50)
+
+
+def test_evaluation_counts_the_serves_of_a_match_and_the_balls_off_the_table():
+    from foosball_gym.evaluation import evaluate
+
+    # Two still keepers: the ball served at rest in front of one lies still for a second, dead,
+    # and is served again; the match's two seconds end as the second ball dies.
+    result = evaluate(
+        lambda obs: STILL_KEEPER,
+        "Foosball-KeeperVsKeeper-v0",
+        {"continuous": True, "match_seconds": 2},
+        episodes=1,
+        opponent="scripted:0",
+        opponent_name="scripted:0",
+    )
+    assert (result.serves, result.off_table) == (2, 0)
+    assert "serves               2" in result.table()
+    assert "off the table        0 (0.0 % of serves)" in result.table()
+    assert result.to_dict()["serves"] == 2
