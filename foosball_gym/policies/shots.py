@@ -85,7 +85,8 @@ def margins(
     and stay inside the goal mouth; negative where they can be blocked or miss.
 
     Args:
-        x0, y0: where the ball is struck (home frame, attacking +x).
+        x0: where the ball is struck along the table (home frame, attacking +x).
+        y0: where it is struck across the table.
         angles: the shots' directions from +x (rad).
         defenders: the other team's rods with their prismatic values, as the home side sees
             them (``table.AWAY`` rods).
@@ -136,8 +137,9 @@ def plan_reacting_shot(
 def plan_shot_past(
     x0: float, y0: float, defenders: Sequence[tuple[table.Rod, float]], corner: bool = False
 ) -> float:
-    """The shot angle (rad) no defender can reach in time where there is one; where there is
-    none, the one that passes widest of them where they stand, which makes them move.
+    """The shot angle (rad) from (x0, y0) that no defender can reach in time where there is
+    one; where there is none, the one that passes widest of them where they stand, which makes
+    them move.
 
     A shot every reacting defender can block is not made better by aiming it where they block
     it least badly: that chose wide bank shots, which came back off the far keeper and along
@@ -163,8 +165,9 @@ def corner_shot(x0: float, y0: float, keeper: table.Rod, slide: float) -> float:
 
     A keeper that follows the ball goes with it to the edge of its travel, and the ball,
     back off the end wall, meets the back of its foot and goes in: measured against the
-    scripted keeper from a resting ball 1 m away, shots within a window about 2 degrees wide
-    score, those that reach the end wall 0.12-0.165 m from the middle.
+    kicking keeper (``scripted:1``) from a resting ball 1 m away, the shots of a window about
+    2 degrees wide on either side score, those that reach the end wall 0.12-0.165 m from the
+    middle (as :func:`margins` draws their paths).
     """
     side = -1.0 if keeper.figurine_y(slide)[0] > 0 else 1.0
     angles = _ALL[np.sign(_ALL) == side]  # off the side wall on that side, coming back in
