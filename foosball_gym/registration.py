@@ -176,6 +176,9 @@ def describe_envs() -> str:
         )
         env.close()
         lines.append("    " + (cls.__doc__ or "").strip().splitlines()[0])
+        if entry.task.ladder:
+            levels = ", ".join(f"{i} {level.name}" for i, level in enumerate(entry.task.ladder))
+            lines.append(f"    scripted ladder (scripted:N; scripted is the top): {levels}")
         grid, docs = cls.option_grid(), cls.argument_docs()
         for name, default in cls.option_defaults().items():
             values = grid.get(name)

@@ -288,7 +288,8 @@ def write_league(league: League, out: str | Path) -> tuple[Path, Path | None]:
 
 
 def plot_league(league: League, path: Path) -> Path:
-    """Elo against training steps for the generations; other players as level lines."""
+    """Elo against training steps for the generations; other players as level lines (in a
+    league without a run's generations, every player side by side)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -312,14 +313,25 @@ def plot_league(league: League, path: Path) -> Path:
                 fontsize=7,
             )
     others = [i for i in range(len(league.players)) if i not in run]
+    if not run:
+        # No run's generations to plot against their steps: the players side by side.
+        order = [int(i) for i in np.argsort(r.elo, kind="stable")]
+        xs = np.arange(len(order))
+        err = np.vstack([r.elo[order] - r.low[order], r.high[order] - r.elo[order]])
+        ax.errorbar(xs, r.elo[order], yerr=err, fmt="o", capsize=3)
+        ax.set_xticks(xs, [league.players[i].name for i in order])
+        ax.set_xlabel("player")
+        others = []
+    else:
+        ax.set_xlabel("training steps")
     for k, i in enumerate(others):
         line = ax.axhline(r.elo[i], linestyle="--", color=f"C{k + 1}", label=league.players[i].name)
         ax.axhspan(r.low[i], r.high[i], color=line.get_color(), alpha=0.12)
-    ax.set_xlabel("training steps")
     ax.set_ylabel(f"Elo (relative to {r.anchor})")
     ax.set_title(f"League on {league.env_id}: {league.games} games a pair, 95 % intervals")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    if run or others:
+        ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
