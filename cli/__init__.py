@@ -14,8 +14,9 @@ import argparse
 from collections.abc import Sequence
 
 import foosball_gym
-from foosball_gym.cli import calibrate, envs, evaluate, league, migrate, play, train
-from foosball_gym.cli.common import CliError
+
+from . import calibrate, envs, evaluate, league, migrate, play, train
+from .common import CliError
 
 # In the order ``foosball --help`` lists them.
 COMMANDS = (train, evaluate, league, play, calibrate, envs, migrate)

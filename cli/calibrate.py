@@ -7,7 +7,7 @@ import glob
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.cli.common import CliError, LibraryDefault, given, grid, show_size
+from .common import CliError, LibraryDefault, given, grid, show_size
 
 CALIBRATE_TABLE = "foosball_gym.play.stack:calibrate_table"
 

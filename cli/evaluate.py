@@ -12,7 +12,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.cli.common import (
+from foosball_gym.evaluation import evaluate, video_format
+
+from .common import (
     CliError,
     add_env_arguments,
     check_writable,
@@ -22,7 +24,6 @@ from foosball_gym.cli.common import (
     scripted,
     seed,
 )
-from foosball_gym.evaluation import evaluate, video_format
 
 
 def add_parser(subparsers: Any) -> None:

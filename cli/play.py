@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from foosball_gym.cli.common import (
+from .common import (
     CliError,
     LibraryDefault,
     _has_display,
