@@ -118,6 +118,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": table.CONTROL_HZ}
+    observation_space: spaces.Box
+    action_space: spaces.Box
 
     def __new__(cls, *args: Any, **options: Any) -> FoosballEnv:
         cls.check_option_names(options)
@@ -363,6 +365,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise gym.error.ResetNeeded("call reset() before step()")
         act = check_action(action, self._n_act, "action")
         if self._baseline is not None:
+            assert self._last_obs is not None  # reset() sets it before any step
             base = self._baseline(self._last_obs)
             act = [float(a) for a in residual_action(base, self.residual, act)]
         game = self.game
@@ -400,7 +403,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             self.render()
         return obs, float(sum(terms.values())), outcome.ended and not continuous, False, info
 
-    def render(self) -> np.ndarray | None:
+    # gymnasium returns a TypeVar bound to nothing from render(), which no frame type matches.
+    def render(self) -> np.ndarray | None:  # type: ignore[override]
         if self.render_mode == "rgb_array":
             return self.sim.render(self.render_width, self.render_height)
         if self.render_mode == "human":

@@ -145,23 +145,23 @@ class ScriptedTeam:
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         # Python floats: numpy's scalars cost more to compute with than they save.
-        obs = np.asarray(obs).tolist()
-        x, y, vx, vy = (obs[i] for i in self._ball)
-        out = []
+        values: list[float] = np.asarray(obs).tolist()
+        x, y, vx, vy = (values[i] for i in self._ball)
+        out: list[float] = []
         for rod, own in zip(self.rods, self._own):
             if self.deflect and own is not None:
-                move = self._deflection(rod, float(obs[own[0]]), x, y, vx, vy, obs)
+                move = self._deflection(rod, float(values[own[0]]), x, y, vx, vy, values)
                 if move is not None:
                     out.extend(move)
                     continue
             target = self.target_y(rod, x, y, vx, vy)
             offset = 0.0
             if self.aim and self._in_reach(rod, x, vx, vy):
-                offset = offset_for_angle(plan_shot(x, y, self._blocker_positions(obs)))
+                offset = offset_for_angle(plan_shot(x, y, self._blocker_positions(values)))
                 target = y - offset
             out.append(slide_for(rod, target) / rod.slide_limit)
             if self.joints == "both":
-                state = None if own is None else (float(obs[own[0]]), float(obs[own[1]]))
+                state = None if own is None else (float(values[own[0]]), float(values[own[1]]))
                 out.append(self.spin_for(rod, x, y, vx, vy, state, offset) / table.SPIN_LIMIT)
         return np.array(out, dtype=np.float32)
 

@@ -234,13 +234,13 @@ class TableSim:
             slide, spin: joint values per rod in play (default 0).
             ball_position, ball_velocity: see :meth:`place_ball`.
         """
-        slide = np.zeros(self._n) if slide is None else np.asarray(slide, dtype=float)
-        spin = np.zeros(self._n) if spin is None else np.asarray(spin, dtype=float)
-        if slide.shape != (self._n,) or spin.shape != (self._n,):
+        slides = np.zeros(self._n) if slide is None else np.asarray(slide, dtype=float)
+        spins = np.zeros(self._n) if spin is None else np.asarray(spin, dtype=float)
+        if slides.shape != (self._n,) or spins.shape != (self._n,):
             raise ValueError(f"slide and spin need one value per rod in play ({self._n})")
         ball = self._ball_from(ball_position, ball_velocity, rolling=False)
         drives = self._drives
-        drives.pos[:] = [float(v) for v in (*slide, *spin)]
+        drives.pos[:] = [float(v) for v in (*slides, *spins)]
         drives.vel[:] = [0.0] * (2 * self._n)
         self._ball_state = ball
         self._worlds.enter(self._worlds.own, (), ball, self._materials())

@@ -8,6 +8,7 @@ on the game; the real table needs only the task's :class:`~foosball_gym.policy_i
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -99,7 +100,7 @@ class Task:
         """Whether the task is met with this score so far."""
         raise NotImplementedError
 
-    def scripted_policy(self, names: list[str], precise_state: bool = True) -> ScriptedTeam:
+    def scripted_policy(self, names: Sequence[str], precise_state: bool = True) -> ScriptedTeam:
         """The scripted baseline for the learner's side, on observations with ``names``.
 
         ``precise_state``: the observation is the simulator's own state, not an estimate from a
