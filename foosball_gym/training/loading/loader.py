@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from foosball_gym.policy_io.task import residual_action
-from foosball_gym.training.loading.rllib_policy import is_rllib_run, load_rllib_policy
+from foosball_gym.training.loading.rllib_policy import RllibPolicy, is_rllib_run, load_rllib_policy
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot, policy_from_state_dict
 from foosball_gym.training.run_dir.files import (
     CONFIG_FILE,
@@ -45,7 +45,7 @@ class LoadedPolicy:
     an environment made with them takes the whole action.
     """
 
-    policy: PolicySnapshot
+    policy: PolicySnapshot | RllibPolicy
     env_id: str | None
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     source: str = ""
@@ -70,7 +70,9 @@ class LoadedPolicy:
         import gymnasium as gym
 
         env = gym.make(env_id, **(env_kwargs or {}))
-        size = int(np.prod(env.observation_space.shape))
+        shape = env.observation_space.shape
+        assert shape is not None  # the environments observe a Box
+        size = int(np.prod(shape))
         env.close()
         expected = self.policy.observation_size
         if size != expected:

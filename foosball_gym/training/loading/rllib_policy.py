@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +23,7 @@ from foosball_gym.training.run_dir.tensors import load_tensors
 
 POLICY_FORMAT = 1
 
-_ACTIVATIONS = {
+_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "tanh": np.tanh,
     "relu": lambda x: np.maximum(x, 0.0),
     "linear": lambda x: x,
@@ -74,6 +74,8 @@ class RllibPolicy:
             raise ValueError(
                 f"unknown activation {activation!r}; allowed: {', '.join(_ACTIVATIONS)}"
             )
+        if (obs_mean is None) != (obs_std is None):
+            raise ValueError("obs_mean and obs_std are given together or not at all")
         self.weights = weights
         self.activation = activation
         self._act = _ACTIVATIONS[activation]
@@ -98,6 +100,7 @@ class RllibPolicy:
         if single:
             x = x[None]
         if self.obs_mean is not None:
+            assert self.obs_std is not None  # __init__ takes both or neither
             # RLlib's MeanStdFilter: (x - mean) / (std + 1e-8), then clipped.
             x = (x - self.obs_mean) / (self.obs_std + 1e-8)
             if self.clip_obs:

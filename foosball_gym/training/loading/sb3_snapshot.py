@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import torch as th
 from gymnasium import spaces
 
@@ -55,7 +56,8 @@ def policy_from_state_dict(state: Mapping[str, Any]) -> Any:
         obs_size = (pi[0] if pi else state["action_net.weight"]).shape[1]
         act_size = state["action_net.weight"].shape[0]
         net_arch = {"pi": [w.shape[0] for w in pi], "vf": [w.shape[0] for w in vf]}
-        cls, extra = ActorCriticPolicy, {}
+        cls: type[ActorCriticPolicy | SACPolicy] = ActorCriticPolicy
+        extra: dict[str, Any] = {}
     elif "actor.mu.weight" in state:
         from stable_baselines3.sac.policies import SACPolicy
 
@@ -104,14 +106,16 @@ class PolicySnapshot:
     def __init__(
         self,
         policy: Any,
-        obs_mean: np.ndarray | None = None,
-        obs_var: np.ndarray | None = None,
+        obs_mean: npt.ArrayLike | None = None,
+        obs_var: npt.ArrayLike | None = None,
         clip_obs: float = 10.0,
         epsilon: float = 1e-8,
         generation: int = 0,
         env_id: str | None = None,
         deterministic: bool = True,
     ) -> None:
+        if (obs_mean is None) != (obs_var is None):
+            raise ValueError("obs_mean and obs_var are given together or not at all")
         # Rebuilt from its constructor arguments and weights (as SB3 saves policies): a deep
         # copy would trip over the tensors a policy keeps from its last forward pass.
         self.policy = type(policy)(**policy._get_constructor_parameters())
@@ -144,6 +148,7 @@ class PolicySnapshot:
         while env is not None and not isinstance(env, VecNormalize):
             env = getattr(env, "venv", None)
         if isinstance(env, VecNormalize) and env.norm_obs:
+            assert not isinstance(env.obs_rms, dict)  # the environments observe a Box
             return cls(
                 model.policy,
                 env.obs_rms.mean,
@@ -158,6 +163,7 @@ class PolicySnapshot:
     def normalise(self, obs: np.ndarray) -> np.ndarray:
         if self.obs_mean is None:
             return obs.astype(np.float32)
+        assert self.obs_var is not None  # __init__ takes both or neither
         z = (obs - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon)
         return np.clip(z, -self.clip_obs, self.clip_obs).astype(np.float32)
 
