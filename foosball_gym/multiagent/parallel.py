@@ -108,7 +108,9 @@ class FoosballParallelEnv(ParallelEnv):
         if not isinstance(max_cycles, (int, np.integer)) or max_cycles <= 0:
             raise ValueError(f"max_cycles must be a positive integer, got {max_cycles!r}")
         self.max_cycles = int(max_cycles)
+        assert isinstance(spec.entry_point, str)  # registered as "module:Class"
         env = load_env_creator(spec.entry_point)(**{**spec.kwargs, **env_kwargs})
+        assert isinstance(env, FoosballEnv)  # GAME_IDS are this package's environments
         self._env: FoosballEnv = env
         self._closed = False
         layout = env.layout
