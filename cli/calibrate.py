@@ -83,8 +83,8 @@ def run(args: argparse.Namespace) -> int:
         frame = got[1]
     chessboard = None
     if args.chessboard:
-        chessboard = [cv2.imread(p) for p in sorted(glob.glob(args.chessboard))]
-        chessboard = [img for img in chessboard if img is not None]
+        images = [cv2.imread(p) for p in sorted(glob.glob(args.chessboard))]
+        chessboard = [img for img in images if img is not None]
     try:
         summary = calibrate_table(
             config, frame, chessboard, **given(args, "pattern", "square", "home_side")
