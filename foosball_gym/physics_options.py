@@ -39,6 +39,7 @@ def check_physics(
         ("rolling_resistance", rolling_resistance, 0.0, 0.5),
     ):
         try:
+            # Whatever was given: float() is what tells whether it is a number.
             number = float(value)  # type: ignore[arg-type]
         except (TypeError, ValueError):
             number = math.nan
