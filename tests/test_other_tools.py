@@ -1,8 +1,10 @@
-"""The environments from other tools: RL Zoo with the shipped hyperparameter files, and
-Gymnasium's RecordVideo."""
+"""The environments from other tools: Gymnasium's "module:id" form in a process that never
+imported the package, RLlib's env runners, RL Zoo with the shipped hyperparameter files, and
+Gymnasium's RecordVideo (docs/other-tools.md)."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from importlib.util import find_spec
@@ -23,7 +25,14 @@ needs_train = pytest.mark.skipif(
 needs_zoo = pytest.mark.skipif(
     find_spec("rl_zoo3") is None, reason='needs the zoo extra: pip install "foosball_gym[zoo]"'
 )
+needs_rllib = pytest.mark.skipif(
+    any(find_spec(m) is None for m in ("ray", "torch")),
+    reason='needs the distributed extra: pip install "foosball_gym[distributed]"',
+)
+
 BLOCK = "Foosball-Block-v0"
+# Ray runs this in each of its worker processes before they take work.
+SETUP_HOOK = "foosball_gym.registration.register_envs"
 
 
 def fresh_python(code: str, cwd: Path) -> subprocess.CompletedProcess:
@@ -31,6 +40,84 @@ def fresh_python(code: str, cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=300
     )
+
+
+# ------------------------------------------------------------------ Gymnasium's module:id
+
+
+def test_a_module_prefixed_id_makes_the_env_where_nothing_imported_the_package(tmp_path):
+    # gym.make_vec of the id is what RLlib's env runners call; async makes each env in a
+    # process of its own.
+    code = (
+        "import numpy as np, gymnasium as gym\n"
+        "env = gym.make('foosball_gym:Foosball-Block-v0')\n"
+        "obs, _ = env.reset(seed=0)\n"
+        "assert obs.shape == (6,) and env.spec.max_episode_steps == 90\n"
+        "env.close()\n"
+        "for mode in ('sync', 'async'):\n"
+        "    envs = gym.make_vec('foosball_gym:Foosball-Score-v0', num_envs=2,\n"
+        "                        vectorization_mode=mode, ball_start='incoming')\n"
+        "    envs.reset(seed=0)\n"
+        "    envs.step(np.zeros((2, 2), np.float32))\n"
+        "    envs.close()\n"
+        "print('plain id afterwards:', 'Foosball-Block-v0' in gym.registry)\n"
+    )
+    before = fresh_python("import gymnasium as gym; gym.make('Foosball-Block-v0')", tmp_path)
+    assert before.returncode != 0 and "Foosball-Block" in before.stderr
+    after = fresh_python(code, tmp_path)
+    assert after.returncode == 0, after.stderr[-3000:]
+    assert "plain id afterwards: True" in after.stdout
+
+
+# ------------------------------------------------------------------ RLlib's env runners
+
+
+def rllib_run(env: str, runtime_env: dict | None) -> tuple[list, int]:
+    """One PPO iteration on ``env`` with one env runner in its own process; the id of the
+    environment the runner made and its process id, and this process's id."""
+    import ray
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, runtime_env=runtime_env)
+    algo = None
+    try:
+        config = (
+            PPOConfig()
+            .environment(env)
+            .env_runners(num_env_runners=1, num_envs_per_env_runner=1, rollout_fragment_length=64)
+            .training(train_batch_size_per_learner=64, minibatch_size=64, num_epochs=1)
+            .rl_module(model_config={"fcnet_hiddens": [16]})
+        )
+        algo = config.build_algo()
+        result = algo.train()
+        assert result["env_runners"]["num_env_steps_sampled_lifetime"] >= 64
+        made = algo.env_runner_group.foreach_env_runner(
+            lambda runner: (runner.env.unwrapped.envs[0].spec.id, os.getpid()),
+            local_env_runner=False,
+        )
+        return made, os.getpid()
+    finally:
+        if algo is not None:
+            algo.stop()
+        ray.shutdown()
+
+
+@needs_rllib
+def test_rllib_env_runners_make_the_module_prefixed_id_with_no_setup():
+    made, driver = rllib_run(f"foosball_gym:{BLOCK}", runtime_env=None)
+    assert len(made) == 1
+    env_id, runner = made[0]
+    assert env_id == BLOCK and runner != driver
+
+
+@needs_rllib
+@pytest.mark.slow
+def test_rllib_env_runners_make_the_plain_id_where_ray_runs_the_registration_hook():
+    # docs/other-tools.md runs the same in the default suite (its example); here what the
+    # runner made is checked too.
+    made, driver = rllib_run(BLOCK, runtime_env={"worker_process_setup_hook": SETUP_HOOK})
+    env_id, runner = made[0]
+    assert env_id == BLOCK and runner != driver
 
 
 # ------------------------------------------------------------------ RL Zoo
@@ -124,19 +211,11 @@ def test_rl_zoo_records_a_video_of_its_run_through_the_package_runner(zoo_block_
 
     logs = zoo_block_run.parent.parent
     videos = tmp_path / "videos"
-    # On its own, rl_zoo3.record_video fails with a KeyError: nothing registered the id.
-    alone = [sys.executable, "-m", "rl_zoo3.record_video", "--algo", "ppo", "--env", BLOCK]
-    args = ["-f", str(logs), "-n", "60", "-o", str(videos)]
-    args += ["--env-kwargs", "render_width:64", "render_height:36"]
-    failed = subprocess.run([*alone, *args], capture_output=True, text=True, timeout=300)
-    assert failed.returncode != 0 and "KeyError" in failed.stderr
-    runner = [sys.executable, "-m", "foosball_gym.rl_zoo", "record_video"]
-    done = subprocess.run(
-        [*runner, "--algo", "ppo", "--env", BLOCK, *args],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    # rl_zoo3.record_video on its own fails with a KeyError: nothing registered the id.
+    command = [sys.executable, "-m", "foosball_gym.rl_zoo", "record_video", "--algo", "ppo"]
+    command += ["--env", BLOCK, "-f", str(logs), "-n", "60", "-o", str(videos)]
+    command += ["--env-kwargs", "render_width:64", "render_height:36"]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
     (video,) = videos.glob("*.mp4")
     capture = cv2.VideoCapture(str(video))
