@@ -228,17 +228,10 @@ class FoosballParallelEnv(ParallelEnv):
                 terminal,
             ),
         }
-        home_info = {
-            "goal": outcome.goal,
-            "is_success": game.success,
-            "out_of_table": outcome.out_of_table,
-            "stagnated": outcome.stagnated,
-            "goals_for": game.goals_for,
-            "goals_against": game.goals_against,
-        }
+        # The single-agent env's info, which has the keys and types of its reset's.
+        home_info = env.step_info(outcome, terms["home"])
         infos = {"home": home_info, "away": self._away_info(home_info)}
-        for agent in AGENTS:
-            infos[agent].update({"reward_" + name: terms[agent][name] for name in TERMS})
+        infos["away"].update(("reward_" + name, float(terms["away"][name])) for name in TERMS)
         if continuous:
             goals = game.goals_for, game.goals_against
             game.start(env.task.sample_start(env.np_random))
