@@ -516,7 +516,7 @@ class TableSim:
         self.__dict__.update(state)
         if saved is not None:
             self._worlds = TableWorlds(self.rods, self._drives, self.physics_hz)
-            self._worlds.load(saved, self._ball_state, self._materials())
+            self._worlds.load(saved, state["_ball_state"], self._materials())
 
     def __del__(self) -> None:
         with contextlib.suppress(Exception):
