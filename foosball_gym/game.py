@@ -249,7 +249,7 @@ class Game:
 
 @dataclass(frozen=True)
 class _ByValue:
-    """An opponent pickled by cloudpickle: pickle reads it back where cloudpickle is installed."""
+    """An opponent pickled by cloudpickle (pickle reads it back, cloudpickle installed)."""
 
     data: bytes
 
@@ -280,22 +280,15 @@ def _pickled(policy: Policy) -> Policy | _ByValue:
     try:
         pickle.dumps(policy)
         return policy
-    except Exception as err:
-        refused = err
-    advice = (
-        "set an opponent that pickles (a module-level function or an instance of a "
-        "module-level class), or set_opponent(None) for the scripted team, before copying"
-    )
-    try:
-        import cloudpickle
-    except ImportError:
-        raise TypeError(
-            f"cannot copy the game: pickle cannot take its opponent {policy!r} ({refused}); "
-            f"{advice}, or install cloudpickle"
-        ) from refused
+    except Exception:
+        pass
+    import cloudpickle  # only for what pickle cannot take
+
     try:
         return _ByValue(cloudpickle.dumps(policy))
     except Exception as err:
         raise TypeError(
-            f"cannot copy the game: its opponent {policy!r} cannot be pickled ({err}); {advice}"
+            f"cannot copy the game: its opponent {policy!r} cannot be pickled ({err}); set an "
+            "opponent that pickles (a module-level function or an instance of a module-level "
+            "class), or set_opponent(None) for the scripted team, before copying"
         ) from err

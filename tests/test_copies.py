@@ -227,7 +227,7 @@ def test_an_opponent_pickle_cannot_find_is_copied_by_value():
         env.close()
 
 
-def test_an_opponent_that_cannot_be_copied_is_refused_naming_it(monkeypatch):
+def test_an_opponent_that_cannot_be_copied_is_refused_naming_it():
     class Locked:
         def __init__(self):
             self.lock = threading.Lock()
@@ -243,10 +243,6 @@ def test_an_opponent_that_cannot_be_copied_is_refused_naming_it(monkeypatch):
             for how in ("pickle", "cloudpickle"):
                 with pytest.raises(TypeError, match="cannot copy the game: its opponent .*Locked"):
                     COPIERS[how](copied)
-        env.unwrapped.set_opponent(lambda obs: obs[:2])
-        monkeypatch.setitem(sys.modules, "cloudpickle", None)
-        with pytest.raises(TypeError, match="pickle cannot take its opponent .*cloudpickle"):
-            pickle.dumps(env)
         env.unwrapped.set_opponent(None)
         assert type(pickle.loads(pickle.dumps(env)).unwrapped.opponent).__name__ == "ScriptedTeam"
     finally:
