@@ -8,6 +8,7 @@ actions, observations, reward terms, info, rendering, seeding and domain randomi
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Iterable, Mapping
 from typing import Any
@@ -21,7 +22,7 @@ from foosball_gym.envs import options as env_options
 from foosball_gym.envs.estimated import CameraNoise, EstimatedState
 from foosball_gym.envs.options import RENDER_MODES
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
-from foosball_gym.game import Game, Outcome, Policy
+from foosball_gym.game import Game, Outcome, Policy, portable, unpacked
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.observations import check_flag, observation_options
 from foosball_gym.policy_io.task import TaskInterface, check_action, residual_action
@@ -416,6 +417,24 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         sim = getattr(self, "sim", None)
         if sim is not None:
             sim.close()
+
+    # ------------------------------------------------------------------ copies
+
+    def __getstate__(self) -> dict[str, Any]:
+        # A copy is an env of its own: the game and its simulator copy themselves. gym.make
+        # keeps the opponent among the spec's kwargs too; it is copied as the game copies it.
+        state = self.__dict__.copy()
+        spec = state.get("spec")
+        if spec is not None and spec.kwargs.get("opponent") is not None:
+            spec = state["spec"] = copy.copy(spec)
+            spec.kwargs = {**spec.kwargs, "opponent": portable(spec.kwargs["opponent"])}
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        spec = state.get("spec")
+        if spec is not None and "opponent" in spec.kwargs:
+            spec.kwargs["opponent"] = unpacked(spec.kwargs["opponent"])
+        self.__dict__.update(state)
 
     # ------------------------------------------------------------------ helpers
 

@@ -19,7 +19,9 @@ import functools
 import math
 import os
 import sys
+import tempfile
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from functools import cache
 from typing import TYPE_CHECKING
 
@@ -380,9 +382,47 @@ class World:
         self.reset_pose(self.ball, position, orientation)
         self.reset_velocity(self.ball, velocity, spin)
 
+    def save(self) -> bytes:
+        """Everything Bullet holds of this world (the bodies' state and the contacts it carries
+        from step to step) as the bytes of a ``.bullet`` file, for :meth:`load`."""
+        with tempfile.TemporaryDirectory() as folder:
+            path = os.path.join(folder, "world.bullet")
+            self.client.saveBullet(path)
+            with open(path, "rb") as file:
+                return file.read()
+
+    def load(self, saved: bytes, dt: float, substeps: int) -> None:
+        """Put this world in the state :meth:`save` took from a world of the same rods, whose
+        step was ``dt`` in ``substeps``. Bullet saves no motors: the next step tells them."""
+        with tempfile.TemporaryDirectory() as folder:
+            path = os.path.join(folder, "world.bullet")
+            with open(path, "wb") as file:
+                file.write(saved)
+            try:
+                self.client.restoreState(fileName=path)
+            except pybullet.error as err:
+                msg = f"a saved Bullet world does not fit this one (rods {self.names})"
+                raise ValueError(msg + ": saved from other rods or by another Bullet") from err
+        # Loading brings the saved world's solver settings; the step is set to match them.
+        self.dt = math.nan
+        self.set_step(dt, substeps)
+        self.sent = None
+
     def close(self) -> None:
         with contextlib.suppress(Exception):
             self.client.disconnect()
+
+
+@dataclass(frozen=True)
+class SavedWorlds:
+    """A table's worlds as :meth:`TableWorlds.save` found them: the rods (indices) of the
+    world that held the ball (None: the world without rods), those standing in it, that world
+    as :meth:`World.save` gives it, and its step then, ``(dt, substeps)``."""
+
+    window: tuple[int, ...] | None
+    simulated: tuple[int, ...]
+    bullet: bytes
+    step: tuple[float, int]
 
 
 class TableWorlds:
@@ -498,6 +538,22 @@ class TableWorlds:
         else:
             # Bullet's joint motors must let go before raw torques can move the joints.
             world.let_go(links)
+
+    def save(self) -> SavedWorlds:
+        """What :meth:`load` needs to carry on as these worlds would: the world holding the
+        ball, saved whole. The others need nothing: entering a world clears it."""
+        world = self.current
+        window = None
+        if world is not self.own:
+            window = tuple(i for i, rod in enumerate(self.rods) if rod.name in world.links)
+        return SavedWorlds(window, self.simulated, world.save(), (world.dt, world.substeps))
+
+    def load(self, saved: SavedWorlds, ball: tuple, materials: dict[str, float]) -> None:
+        """Carry on from ``saved`` (from a table of the same rods), the drives already in
+        their saved state; ``ball`` is the ball's state then."""
+        world = self.own if saved.window is None else self._world_of(saved.window)
+        self.enter(world, saved.simulated, ball, materials)
+        world.load(saved.bullet, *saved.step)
 
     def close(self) -> None:
         for world in (self.own, *self._worlds.values()):
