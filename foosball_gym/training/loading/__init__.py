@@ -11,12 +11,13 @@ from foosball_gym.training.loading.loader import (
     builtin_path,
     load_policy,
 )
-from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning
+from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning, UnknownPhysicsWarning
 
 __all__ = [
     "LoadedPolicy",
     "ModelLoadError",
     "PhysicsMismatchWarning",
+    "UnknownPhysicsWarning",
     "builtin_names",
     "builtin_path",
     "load_policy",

@@ -8,7 +8,6 @@ algorithm.
 from __future__ import annotations
 
 import json
-import warnings
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -25,7 +24,7 @@ from foosball_gym.training.run_dir.files import (
     MODEL_FILE,
     NORM_FILE,
 )
-from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning, physics_mismatch
+from foosball_gym.training.run_dir.physics import warn_physics
 from foosball_gym.training.run_dir.storage import UntrustedFileError, read_model_zip, read_norm
 
 
@@ -118,9 +117,11 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     normalisation statistics are read from ``vecnormalize.json``. A run from before that file
     (``vecnormalize.pkl``) is refused with a message saying how to migrate it.
 
-    Warns with :class:`PhysicsMismatchWarning` where the model was trained on another physics
-    revision than the current one; a model without a record (a run from before runs recorded
-    it, or a bare zip) counts as revision 1.
+    Warns with :class:`~foosball_gym.training.run_dir.physics.PhysicsMismatchWarning` where
+    the model was trained on another physics revision than the current one (a run from before
+    runs recorded it was trained on revision 1). A model with no run's ``config.json`` at all
+    (a bare zip) warns with :class:`~foosball_gym.training.run_dir.physics.UnknownPhysicsWarning`:
+    its revision is unknown.
 
     Args:
         spec: the run directory, the model zip, or ``builtin:NAME``.
@@ -176,9 +177,7 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
         )
     else:
         snapshot = PolicySnapshot(policy, env_id=env_id)
-    mismatch = physics_mismatch(config, f"the model {text}")
-    if mismatch:
-        warnings.warn(mismatch, PhysicsMismatchWarning, stacklevel=2)
+    warn_physics(config, f"the model {text}")
     env_kwargs = dict((config or {}).get("env_kwargs", {}))
     residual = float(env_kwargs.pop("residual", 0.0) or 0.0)
     baseline = None
