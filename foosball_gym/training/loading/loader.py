@@ -16,7 +16,13 @@ from typing import Any
 import numpy as np
 
 from foosball_gym.policy_io.task import residual_action
+from foosball_gym.training.loading.recurrent import RecurrentSnapshot
 from foosball_gym.training.loading.rllib_policy import is_rllib_run, load_rllib_policy
+from foosball_gym.training.loading.sb3_policies import (
+    is_recurrent,
+    policy_class_name,
+    policy_from_zip,
+)
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot, policy_from_state_dict
 from foosball_gym.training.run_dir.files import (
     CONFIG_FILE,
@@ -25,7 +31,12 @@ from foosball_gym.training.run_dir.files import (
     NORM_FILE,
 )
 from foosball_gym.training.run_dir.physics import warn_physics
-from foosball_gym.training.run_dir.storage import UntrustedFileError, read_model_zip, read_norm
+from foosball_gym.training.run_dir.storage import (
+    NormStats,
+    UntrustedFileError,
+    read_model_zip,
+    read_norm,
+)
 
 
 class ModelLoadError(ValueError):
@@ -55,6 +66,17 @@ class LoadedPolicy:
     def observation_size(self) -> int:
         """The size of the observations it takes."""
         return self.policy.observation_size
+
+    @property
+    def recurrent(self) -> bool:
+        """Whether it carries a state from call to call (RecurrentPPO): :meth:`reset` it where
+        each episode starts."""
+        return isinstance(self.policy, RecurrentSnapshot)
+
+    def reset(self) -> None:
+        """Start a new episode: a recurrent policy forgets its state; others have none."""
+        if isinstance(self.policy, RecurrentSnapshot):
+            self.policy.reset()
 
     def __call__(self, obs: Any) -> np.ndarray:
         action = self.policy(obs)
@@ -112,6 +134,11 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     The environment id and options come from the run's ``config.json`` (next to the zip, or
     one level up for a checkpoint); a bare zip without one loads with ``env_id=None``.
 
+    The model zip may be of any Stable-Baselines3 or sb3-contrib algorithm that acts on
+    continuous actions, with its ``MlpPolicy`` (:data:`.sb3_policies.SUPPORTED`); others are
+    refused in one line saying which load. A RecurrentPPO policy carries its LSTM state from
+    call to call: ``reset()`` it where an episode starts (``evaluate`` does).
+
     Nothing is unpickled unless ``trust`` is given: the weights are read as tensors and the
     policy rebuilt around them, the pickled fields SB3 keeps in the zip are left unread, and
     normalisation statistics are read from ``vecnormalize.json``. A run from before that file
@@ -120,8 +147,9 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     Warns with :class:`~foosball_gym.training.run_dir.physics.PhysicsMismatchWarning` where
     the model was trained on another physics revision than the current one (a run from before
     runs recorded it was trained on revision 1). A model with no run's ``config.json`` at all
-    (a bare zip) warns with :class:`~foosball_gym.training.run_dir.physics.UnknownPhysicsWarning`:
-    its revision is unknown.
+    (a bare zip) warns with
+    :class:`~foosball_gym.training.run_dir.physics.UnknownPhysicsWarning`: its revision is
+    unknown.
 
     Args:
         spec: the run directory, the model zip, or ``builtin:NAME``.
@@ -136,49 +164,39 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
         path = builtin_path(text.split(":", 1)[1])
     else:
         path = Path(text)
+    if path.is_dir() and is_rllib_run(path):
+        try:
+            rllib = load_rllib_policy(path)
+        except ValueError as err:
+            raise ModelLoadError(str(err)) from None
+        return LoadedPolicy(
+            policy=rllib, env_id=rllib.env_id, env_kwargs=rllib.env_kwargs, source=str(path)
+        )
     if path.is_dir():
-        if is_rllib_run(path):
-            try:
-                rllib = load_rllib_policy(path)
-            except ValueError as err:
-                raise ModelLoadError(str(err)) from None
-            return LoadedPolicy(
-                policy=rllib, env_id=rllib.env_id, env_kwargs=rllib.env_kwargs, source=str(path)
-            )
         run_dir, zip_path = path, path / MODEL_FILE
         if not zip_path.exists():
             raise ModelLoadError(f"{path} is a directory without {MODEL_FILE}: not a run")
     else:
-        zip_path = path
-        run_dir = path.parent
+        zip_path, run_dir = path, path.parent
     if not zip_path.exists():
         raise ModelLoadError(f"no model at {zip_path}")
     config = _find_config(run_dir)
-    try:
-        _, params, _ = read_model_zip(zip_path)
-        policy = policy_from_state_dict(params["policy"])
-    except (KeyError, ValueError, RuntimeError, EOFError) as err:
-        reason = "it has no policy weights" if isinstance(err, KeyError) else str(err)
-        raise ModelLoadError(
-            f"cannot read {zip_path} as a Stable-Baselines3 model ({reason})"
-        ) from None
     env_id = (config or {}).get("env_id")
+    env_kwargs = dict((config or {}).get("env_kwargs", {}))
     norm = _find_norm(zip_path, run_dir)
+    policy, recurrent = _read_policy(zip_path)
+    stats = None
     if norm is not None:
         run = text if text.startswith("builtin:") else run_dir
-        try:
-            stats = read_norm(norm, run, trust)
-        except UntrustedFileError as err:
-            raise ModelLoadError(str(err)) from None
-        except Exception as err:  # noqa: BLE001 - any unreadable file gets the same message
-            raise ModelLoadError(f"cannot read normalisation statistics {norm}: {err}") from err
-        snapshot = PolicySnapshot(
+        stats = _read_stats(norm, run, trust)
+    cls = RecurrentSnapshot if recurrent else PolicySnapshot
+    if stats is not None and stats.norm_obs:
+        snapshot = cls(
             policy, stats.obs_mean, stats.obs_var, stats.clip_obs, stats.epsilon, env_id=env_id
         )
     else:
-        snapshot = PolicySnapshot(policy, env_id=env_id)
+        snapshot = cls(policy, env_id=env_id)
     warn_physics(config, f"the model {text}")
-    env_kwargs = dict((config or {}).get("env_kwargs", {}))
     residual = float(env_kwargs.pop("residual", 0.0) or 0.0)
     baseline = None
     if residual and env_id is not None:
@@ -193,6 +211,32 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
         trained_residual=residual,
         baseline=baseline,
     )
+
+
+def _read_policy(zip_path: Path) -> tuple[Any, bool]:
+    """The policy in a Stable-Baselines3 zip, and whether it is recurrent."""
+    try:
+        data, params, _ = read_model_zip(zip_path)
+        state = params["policy"]
+        if policy_class_name(data) is None:
+            # Zips that do not name their policy: a PPO or SAC MlpPolicy, told by its weights.
+            return policy_from_state_dict(state), False
+        return policy_from_zip(data, state), is_recurrent(data)
+    except (KeyError, ValueError, RuntimeError, EOFError) as err:
+        reason = "it has no policy weights" if isinstance(err, KeyError) else str(err)
+        raise ModelLoadError(
+            f"cannot read {zip_path} as a Stable-Baselines3 model ({reason})"
+        ) from None
+
+
+def _read_stats(norm: Path, run: Path | str, trust: bool) -> NormStats:
+    """The normalisation statistics in ``norm``: plain numbers, or a pickle only if trusted."""
+    try:
+        return read_norm(norm, run, trust)
+    except UntrustedFileError as err:
+        raise ModelLoadError(str(err)) from None
+    except Exception as err:  # noqa: BLE001 - any unreadable file gets the same message
+        raise ModelLoadError(f"cannot read normalisation statistics {norm}: {err}") from err
 
 
 def _find_config(run_dir: Path) -> dict[str, Any] | None:
