@@ -1,6 +1,6 @@
 """Loading trained policies to play or to rate: :func:`load_policy` reads a run directory of
 either backend, a model zip of any SB3 or sb3-contrib algorithm that acts on continuous
-actions, or ``builtin:NAME``.
+actions, an RL Zoo run, or ``builtin:NAME``.
 
 Needs PyTorch and Stable-Baselines3 (the ``train`` extra), and never imports a trainer or Ray.
 """

@@ -17,6 +17,7 @@ import numpy as np
 
 from foosball_gym.policy_io.task import residual_action
 from foosball_gym.training.loading.recurrent import RecurrentSnapshot
+from foosball_gym.training.loading.rl_zoo import find_zoo_run, is_zoo_run
 from foosball_gym.training.loading.rllib_policy import is_rllib_run, load_rllib_policy
 from foosball_gym.training.loading.sb3_policies import (
     is_recurrent,
@@ -34,6 +35,7 @@ from foosball_gym.training.run_dir.physics import warn_physics
 from foosball_gym.training.run_dir.storage import (
     NormStats,
     UntrustedFileError,
+    load_pickled_norm,
     read_model_zip,
     read_norm,
 )
@@ -129,10 +131,12 @@ def builtin_path(name: str) -> Path:
 
 
 def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
-    """Load a policy from a run directory, a model ``.zip``, or ``builtin:NAME``.
+    """Load a policy from a run directory, a model ``.zip``, an RL Zoo run, or ``builtin:NAME``.
 
     The environment id and options come from the run's ``config.json`` (next to the zip, or
-    one level up for a checkpoint); a bare zip without one loads with ``env_id=None``.
+    one level up for a checkpoint); a bare zip without one loads with ``env_id=None``. An RL
+    Zoo run folder (``<log>/<algo>/<env>_<n>/``, or a zip in one) gives its final model with
+    the environment and options it trained on (see :func:`.rl_zoo.find_zoo_run`).
 
     The model zip may be of any Stable-Baselines3 or sb3-contrib algorithm that acts on
     continuous actions, with its ``MlpPolicy`` (:data:`.sb3_policies.SUPPORTED`); others are
@@ -142,19 +146,20 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     Nothing is unpickled unless ``trust`` is given: the weights are read as tensors and the
     policy rebuilt around them, the pickled fields SB3 keeps in the zip are left unread, and
     normalisation statistics are read from ``vecnormalize.json``. A run from before that file
-    (``vecnormalize.pkl``) is refused with a message saying how to migrate it.
+    (``vecnormalize.pkl``) is refused with a message saying how to migrate it; an RL Zoo run's
+    ``vecnormalize.pkl``, with one saying to trust it.
 
     Warns with :class:`~foosball_gym.training.run_dir.physics.PhysicsMismatchWarning` where
     the model was trained on another physics revision than the current one (a run from before
     runs recorded it was trained on revision 1). A model with no run's ``config.json`` at all
-    (a bare zip) warns with
+    (a bare zip, an RL Zoo run) warns with
     :class:`~foosball_gym.training.run_dir.physics.UnknownPhysicsWarning`: its revision is
     unknown.
 
     Args:
-        spec: the run directory, the model zip, or ``builtin:NAME``.
-        trust: also read pickled files (a legacy ``vecnormalize.pkl``): only for files whose
-            source you trust, since unpickling runs whatever code the file holds.
+        spec: the run directory, the model zip, the RL Zoo run folder, or ``builtin:NAME``.
+        trust: also read pickled files (a legacy or RL Zoo ``vecnormalize.pkl``): only for
+            files whose source you trust, since unpickling runs whatever code the file holds.
 
     Raises:
         ModelLoadError: no model there, or it cannot be read (or only by unpickling, untrusted).
@@ -172,23 +177,36 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
         return LoadedPolicy(
             policy=rllib, env_id=rllib.env_id, env_kwargs=rllib.env_kwargs, source=str(path)
         )
-    if path.is_dir():
-        run_dir, zip_path = path, path / MODEL_FILE
-        if not zip_path.exists():
-            raise ModelLoadError(f"{path} is a directory without {MODEL_FILE}: not a run")
+    env_id: str | None
+    zoo = is_zoo_run(path)
+    if zoo:
+        try:
+            found = find_zoo_run(path)
+        except ValueError as err:
+            raise ModelLoadError(str(err)) from None
+        zip_path, norm, run_dir, config = found.model, found.norm, found.folder, None
+        env_id, env_kwargs = found.env_id, found.env_kwargs
     else:
-        zip_path, run_dir = path, path.parent
-    if not zip_path.exists():
-        raise ModelLoadError(f"no model at {zip_path}")
-    config = _find_config(run_dir)
-    env_id = (config or {}).get("env_id")
-    env_kwargs = dict((config or {}).get("env_kwargs", {}))
-    norm = _find_norm(zip_path, run_dir)
+        if path.is_dir():
+            run_dir, zip_path = path, path / MODEL_FILE
+            if not zip_path.exists():
+                raise ModelLoadError(
+                    f"{path} is a directory without {MODEL_FILE}: not a run of foosball_gym, "
+                    "nor an RL Zoo run (<env>/args.yml), nor an exported RLlib policy"
+                )
+        else:
+            zip_path, run_dir = path, path.parent
+        if not zip_path.exists():
+            raise ModelLoadError(f"no model at {zip_path}")
+        config = _find_config(run_dir)
+        env_id = (config or {}).get("env_id")
+        env_kwargs = dict((config or {}).get("env_kwargs", {}))
+        norm = _find_norm(zip_path, run_dir)
     policy, recurrent = _read_policy(zip_path)
     stats = None
     if norm is not None:
         run = text if text.startswith("builtin:") else run_dir
-        stats = _read_stats(norm, run, trust)
+        stats = _read_stats(norm, run, trust, zoo)
     cls = RecurrentSnapshot if recurrent else PolicySnapshot
     if stats is not None and stats.norm_obs:
         snapshot = cls(
@@ -229,9 +247,18 @@ def _read_policy(zip_path: Path) -> tuple[Any, bool]:
         ) from None
 
 
-def _read_stats(norm: Path, run: Path | str, trust: bool) -> NormStats:
+def _read_stats(norm: Path, run: Path | str, trust: bool, zoo: bool) -> NormStats:
     """The normalisation statistics in ``norm``: plain numbers, or a pickle only if trusted."""
     try:
+        if zoo and norm.suffix == ".pkl":
+            if not trust:
+                raise UntrustedFileError(
+                    f"{norm} holds the RL Zoo run's observation normalisation as a pickle, "
+                    "which can run any code when it is read, so it was not read: give "
+                    "--trust-model (load_policy's trust=True) if you trust where the run "
+                    "comes from"
+                )
+            return load_pickled_norm(norm)
         return read_norm(norm, run, trust)
     except UntrustedFileError as err:
         raise ModelLoadError(str(err)) from None
