@@ -31,8 +31,9 @@ def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "eval",
         help="evaluate a policy on seeded episodes",
-        description="Evaluate a trained model (a run dir, a .zip or builtin:NAME)"
-        " or, with --policy scripted, the scripted baseline of ENV_ID.",
+        description="Evaluate a trained model (a run dir, a .zip of any SB3 or sb3-contrib"
+        " algorithm, an RL Zoo run or builtin:NAME) or, with --policy scripted, the scripted"
+        " baseline of ENV_ID.",
     )
     p.add_argument("target", help="MODEL, or ENV_ID with --policy scripted")
     p.add_argument(

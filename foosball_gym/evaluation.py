@@ -105,7 +105,8 @@ def evaluate(
     """Run ``episodes`` episodes seeded ``seed, seed + 1, ...`` and summarise them.
 
     Args:
-        policy: a callable from one observation to one action.
+        policy: a callable from one observation to one action; one with a ``reset()`` method
+            (a recurrent policy) has it called before each episode, as has ``opponent``.
         env_id: the environment.
         env_kwargs: its options, as keyword arguments of ``gymnasium.make``.
         opponent: for two-player envs, the away side's policy (None: the env's default).
@@ -159,6 +160,7 @@ def evaluate(
     successes = goals_for = goals_against = 0
     try:
         for i in range(episodes):
+            start_episode(policy, opponent)
             obs, info = env.reset(seed=seed + i)
             recorder = writer if i < video_episodes else None
             if recorder is not None:
@@ -207,6 +209,15 @@ def evaluate(
         std_reward=float(np.std(rewards)),
         mean_length=float(np.mean(lengths)),
     )
+
+
+def start_episode(*policies: Policy | None) -> None:
+    """Tell the policies an episode starts: those that carry a state from step to step
+    (a recurrent one) have a ``reset()`` that forgets it."""
+    for policy in policies:
+        reset = getattr(policy, "reset", None)
+        if callable(reset):
+            reset()
 
 
 def _check_fits(policy: Policy, name: str, env_id: str, env: gym.Env) -> None:

@@ -10,7 +10,6 @@ outputs, clipped to [-1, 1].
 from __future__ import annotations
 
 import json
-import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -18,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from foosball_gym.training.run_dir.files import CONFIG_FILE, POLICY_FILE, POLICY_INFO_FILE
-from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning, physics_mismatch
+from foosball_gym.training.run_dir.physics import warn_physics
 from foosball_gym.training.run_dir.tensors import load_tensors
 
 POLICY_FORMAT = 1
@@ -127,7 +126,9 @@ def load_rllib_policy(run_dir: str | Path) -> RllibPolicy:
     Reads ``policy.json`` and ``policy.pt`` with ``torch.load(weights_only=True)``: nothing is
     unpickled, so no trust is needed. Warns with
     :class:`~foosball_gym.training.run_dir.physics.PhysicsMismatchWarning` where the run's
-    ``config.json`` (beside it, or up to two levels up) records other physics than the current one.
+    ``config.json`` (beside it, or up to two levels up) records other physics than the current
+    one, and with :class:`~foosball_gym.training.run_dir.physics.UnknownPhysicsWarning` where
+    neither it nor ``policy.json`` records any.
 
     Raises:
         ValueError: no exported policy there, or its files do not agree with each other.
@@ -180,9 +181,7 @@ def load_rllib_policy(run_dir: str | Path) -> RllibPolicy:
             break
     if config is None and "physics" in info:
         config = {"physics": info["physics"]}
-    mismatch = physics_mismatch(config, f"the model {run_dir}")
-    if mismatch:
-        warnings.warn(mismatch, PhysicsMismatchWarning, stacklevel=2)
+    warn_physics(config, f"the model {run_dir}")
     return RllibPolicy(
         weights,
         info["activation"],

@@ -8,6 +8,7 @@ one never unpickles an object.
 from __future__ import annotations
 
 import copy
+import inspect
 import pickle
 import re
 from collections.abc import Mapping
@@ -84,6 +85,25 @@ def policy_from_state_dict(state: Mapping[str, Any]) -> Any:
     return policy
 
 
+def _constructor_parameters(policy: Any) -> dict[str, Any]:
+    """What rebuilds ``policy``: its constructor's arguments as it reports them, with what
+    sb3-contrib's policies leave out (a RecurrentActorCriticPolicy its LSTM's) and less what
+    the constructor does not take (ARSLinearPolicy reports its parent's ``net_arch``)."""
+    parameters = policy._get_constructor_parameters()
+    if getattr(policy, "lstm_actor", None) is not None:
+        parameters.update(
+            lstm_hidden_size=policy.lstm_actor.hidden_size,
+            n_lstm_layers=policy.lstm_actor.num_layers,
+            shared_lstm=policy.shared_lstm,
+            enable_critic_lstm=policy.enable_critic_lstm,
+            lstm_kwargs=policy.lstm_kwargs,
+        )
+    accepted = inspect.signature(type(policy).__init__).parameters
+    if any(p.kind is p.VAR_KEYWORD for p in accepted.values()):
+        return parameters
+    return {k: v for k, v in parameters.items() if k in accepted}
+
+
 class PolicySnapshot:
     """A frozen policy: raw observations in, actions in [-1, 1] out.
 
@@ -118,7 +138,7 @@ class PolicySnapshot:
             raise ValueError("obs_mean and obs_var are given together or not at all")
         # Rebuilt from its constructor arguments and weights (as SB3 saves policies): a deep
         # copy would trip over the tensors a policy keeps from its last forward pass.
-        self.policy = type(policy)(**policy._get_constructor_parameters())
+        self.policy = type(policy)(**_constructor_parameters(policy))
         self.policy.load_state_dict(copy.deepcopy(policy.state_dict()))
         self.policy.to("cpu")
         self.policy.set_training_mode(False)
@@ -172,9 +192,13 @@ class PolicySnapshot:
         single = obs.ndim == 1
         batch = self.normalise(obs[None] if single else obs)
         with th.no_grad():
-            actions, _ = self.policy.predict(batch, deterministic=self.deterministic)
+            actions = self._predict(batch)
         actions = np.clip(actions, -1.0, 1.0).astype(np.float32)
         return actions[0] if single else actions
+
+    def _predict(self, batch: np.ndarray) -> np.ndarray:
+        actions, _ = self.policy.predict(batch, deterministic=self.deterministic)
+        return actions
 
     def parameters_equal(self, policy: Any) -> bool:
         """True when ``policy`` has exactly this snapshot's weights."""

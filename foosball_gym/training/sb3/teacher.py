@@ -131,6 +131,11 @@ def _model_teacher(spec: str, env_id: str, shape: tuple[int, ...] | None) -> Any
     """A trained model as the teacher; refused where it plays another environment or takes
     other observations than the learner's."""
     policy = load_policy(spec)
+    if policy.recurrent:
+        raise ValueError(
+            f"teacher {spec} is a recurrent policy (RecurrentPPO): a teacher answers each "
+            "observation alone, so give a feed-forward one"
+        )
     if policy.env_id is not None and policy.env_id != env_id:
         raise ValueError(
             f"teacher {spec} was trained on {policy.env_id}, not on the learner's {env_id}"

@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Any, cast
 import gymnasium as gym
 import numpy as np
 
+from foosball_gym.evaluation import start_episode
+
 if TYPE_CHECKING:
     from foosball_gym.envs.base import FoosballEnv
 
@@ -60,6 +62,7 @@ class Arena:
         """Goals of ``home`` and ``away`` in one game served with ``seed``."""
         cast("FoosballEnv", self.env.unwrapped).set_opponent(away.policy)  # None: the scripted side
         policy = home.policy or self.scripted
+        start_episode(home.policy, away.policy)
         obs, info = self.env.reset(seed=seed)
         done = False
         while not done:
