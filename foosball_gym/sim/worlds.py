@@ -21,7 +21,6 @@ import os
 import sys
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
 from functools import cache
 from typing import TYPE_CHECKING
 
@@ -413,18 +412,6 @@ class World:
             self.client.disconnect()
 
 
-@dataclass(frozen=True)
-class SavedWorlds:
-    """A table's worlds as :meth:`TableWorlds.save` found them: the rods (indices) of the
-    world that held the ball (None: the world without rods), those standing in it, that world
-    as :meth:`World.save` gives it, and its step then, ``(dt, substeps)``."""
-
-    window: tuple[int, ...] | None
-    simulated: tuple[int, ...]
-    bullet: bytes
-    step: tuple[float, int]
-
-
 class TableWorlds:
     """The worlds of one table, and the one that holds the ball.
 
@@ -539,21 +526,21 @@ class TableWorlds:
             # Bullet's joint motors must let go before raw torques can move the joints.
             world.let_go(links)
 
-    def save(self) -> SavedWorlds:
-        """What :meth:`load` needs to carry on as these worlds would: the world holding the
-        ball, saved whole. The others need nothing: entering a world clears it."""
+    def save(self) -> tuple:
+        """What :meth:`load` needs to carry on as these worlds would: the rods (indices) of the
+        world holding the ball (none: the world without rods), those standing in it, the world
+        saved whole and its step ``(dt, substeps)``. Entering any other world clears it."""
         world = self.current
-        window = None
-        if world is not self.own:
-            window = tuple(i for i, rod in enumerate(self.rods) if rod.name in world.links)
-        return SavedWorlds(window, self.simulated, world.save(), (world.dt, world.substeps))
+        window = tuple(i for i, rod in enumerate(self.rods) if rod.name in world.links)
+        return window, self.simulated, world.save(), (world.dt, world.substeps)
 
-    def load(self, saved: SavedWorlds, ball: tuple, materials: dict[str, float]) -> None:
-        """Carry on from ``saved`` (from a table of the same rods), the drives already in
-        their saved state; ``ball`` is the ball's state then."""
-        world = self.own if saved.window is None else self._world_of(saved.window)
-        self.enter(world, saved.simulated, ball, materials)
-        world.load(saved.bullet, *saved.step)
+    def load(self, saved: tuple, ball: tuple, materials: dict[str, float]) -> None:
+        """Carry on from what :meth:`save` gave on a table of the same rods, the drives already
+        in their saved state; ``ball`` is the ball's state then."""
+        window, simulated, bullet, step = saved
+        world = self._world_of(window) if window else self.own
+        self.enter(world, simulated, ball, materials)
+        world.load(bullet, *step)
 
     def close(self) -> None:
         for world in (self.own, *self._worlds.values()):
