@@ -1,4 +1,4 @@
-"""The ``foosball`` command: train, eval, league, play, calibrate, envs, migrate.
+"""The ``foosball`` command: train, eval, dataset, league, play, calibrate, envs, migrate.
 
 One module per command, each a thin layer over library functions with ``add_parser`` (its
 options) and ``run`` (parsed options to an exit code); this one assembles the parser and turns
@@ -14,11 +14,12 @@ import argparse
 from collections.abc import Sequence
 
 import foosball_gym
-from foosball_gym.cli import calibrate, envs, evaluate, league, migrate, play, train
-from foosball_gym.cli.common import CliError
+
+from . import calibrate, dataset, envs, evaluate, league, migrate, play, train
+from .common import CliError
 
 # In the order ``foosball --help`` lists them.
-COMMANDS = (train, evaluate, league, play, calibrate, envs, migrate)
+COMMANDS = (train, evaluate, dataset, league, play, calibrate, envs, migrate)
 
 __all__ = ["CliError", "build_parser", "main"]
 

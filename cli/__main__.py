@@ -2,6 +2,6 @@
 
 import sys
 
-from foosball_gym.cli import main
+from . import main
 
 sys.exit(main())

@@ -7,7 +7,7 @@ import glob
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.cli.common import CliError, LibraryDefault, given, grid, show_size
+from .common import CliError, LibraryDefault, given, grid, show_size
 
 CALIBRATE_TABLE = "foosball_gym.play.stack:calibrate_table"
 
@@ -83,8 +83,8 @@ def run(args: argparse.Namespace) -> int:
         frame = got[1]
     chessboard = None
     if args.chessboard:
-        chessboard = [cv2.imread(p) for p in sorted(glob.glob(args.chessboard))]
-        chessboard = [img for img in chessboard if img is not None]
+        images = [cv2.imread(p) for p in sorted(glob.glob(args.chessboard))]
+        chessboard = [img for img in images if img is not None]
     try:
         summary = calibrate_table(
             config, frame, chessboard, **given(args, "pattern", "square", "home_side")

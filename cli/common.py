@@ -93,8 +93,9 @@ def add_trust_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--trust-model",
         action="store_true",
-        help="also read model files stored with pickle (runs from before plain files), which "
-        "can run any code: only for files from a source you trust",
+        help="also read model files stored with pickle (runs from before plain files, an RL "
+        "Zoo run's vecnormalize.pkl), which can run any code: only for files from a source you "
+        "trust",
     )
 
 
@@ -230,7 +231,8 @@ def scripted(
 
 def load_model(spec: str, trust: bool = False) -> Any:
     """A trained policy (:class:`~foosball_gym.training.loading.LoadedPolicy`) from a run
-    directory, a model zip or ``builtin:NAME``; pickled files only with ``trust``."""
+    directory, a model zip, an RL Zoo run or ``builtin:NAME``; pickled files only with
+    ``trust``."""
     from foosball_gym.training import require_train_extra
 
     require_train_extra()

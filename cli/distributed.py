@@ -7,10 +7,11 @@ import shlex
 import signal
 from pathlib import Path
 
-from foosball_gym.cli.common import CliError, check_directory
 from foosball_gym.training.config import TrainConfig
 from foosball_gym.training.rllib.ray_start import INSTALL, require_ray
 from foosball_gym.training.run_dir.files import CONFIG_FILE, RLLIB_BACKEND, has_checkpoint
+
+from .common import CliError, check_directory
 
 
 def _worker_count(text: str) -> int:

@@ -12,7 +12,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.cli.common import (
+from foosball_gym.evaluation import evaluate, video_format
+
+from .common import (
     CliError,
     add_env_arguments,
     check_writable,
@@ -24,7 +26,6 @@ from foosball_gym.cli.common import (
     scripted_spec,
     seed,
 )
-from foosball_gym.evaluation import evaluate, video_format
 
 
 def add_parser(subparsers: Any) -> None:
@@ -32,9 +33,9 @@ def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "eval",
         help="evaluate a policy on seeded episodes",
-        description="Evaluate a trained model (a run dir, a .zip or builtin:NAME)"
-        " or, with --policy scripted, the scripted baseline of ENV_ID (scripted:N: level N of"
-        " its scripted ladder, in the two games).",
+        description="Evaluate a trained model (a run dir, a .zip of any SB3 or sb3-contrib"
+        " algorithm, an RL Zoo run or builtin:NAME) or, with --policy scripted, the scripted"
+        " baseline of ENV_ID (scripted:N: level N of its scripted ladder, in the two games).",
     )
     p.add_argument("target", help="MODEL, or ENV_ID with --policy scripted")
     p.add_argument(

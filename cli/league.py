@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.cli.common import (
+from .common import (
     CliError,
     add_trust_argument,
     check_directory,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from foosball_gym.cli.common import CliError, add_trust_argument
+from .common import CliError, add_trust_argument
 
 
 def add_parser(subparsers: Any) -> None:

@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from foosball_gym.cli.common import (
+from .common import (
     CliError,
     LibraryDefault,
     _has_display,
@@ -149,6 +149,12 @@ def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
         policy = scripted(args.env, env_kwargs, on_table=True, spec=args.model)
         return policy, args.env, env_kwargs
     loaded = load_model(args.model, args.trust_model)
+    if loaded.recurrent:
+        # A table has no episodes to start its memory afresh at, as training had.
+        raise CliError(
+            f"{args.model} is a recurrent policy (RecurrentPPO), which foosball play does not "
+            "run: its memory would span balls where training reset it; rate it with foosball eval"
+        )
     env_id = args.env or loaded.env_id
     if env_id is None:
         raise CliError(f"{args.model} does not say its environment; give --env ENV_ID")

@@ -14,15 +14,6 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.cli.common import (
-    CliError,
-    check_directory,
-    parse_env_kwargs,
-    positive_int,
-    positive_number,
-    seed,
-)
-from foosball_gym.cli.distributed import add_rllib_arguments, run_from_args
 from foosball_gym.training.config import ALGORITHMS, LR_SCHEDULES, VEC_ENV_KINDS, TrainConfig
 from foosball_gym.training.config_file import (
     SHIPPED,
@@ -37,6 +28,16 @@ from foosball_gym.training.run_dir.files import (
     read_backend,
 )
 from foosball_gym.training.selfplay.rule import SELFPLAY_RULES
+
+from .common import (
+    CliError,
+    check_directory,
+    parse_env_kwargs,
+    positive_int,
+    positive_number,
+    seed,
+)
+from .distributed import add_rllib_arguments, run_from_args
 
 # The TrainConfig fields offered as options (n_envs as --n-envs), with how the command line
 # spells their values.

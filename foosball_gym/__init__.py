@@ -15,7 +15,7 @@ register_envs()
 def load_policy(spec: Any, trust: bool = False) -> Any:
     """A trained policy, ready to act: ``policy(obs) -> action`` with its normalisation.
 
-    ``spec`` is a run directory, a model ``.zip`` or ``builtin:NAME``; see
+    ``spec`` is a run directory, a model ``.zip``, an RL Zoo run or ``builtin:NAME``; see
     :func:`foosball_gym.training.loading.load_policy` (the ``train`` extra), which this calls.
     """
     from foosball_gym.training.loading import load_policy as load

@@ -12,12 +12,15 @@ import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 import numpy as np
 
 from foosball_gym.registration import check_env_id
+
+if TYPE_CHECKING:
+    from foosball_gym.envs.base import FoosballEnv
 
 Policy = Callable[[np.ndarray], Any]
 
@@ -110,7 +113,8 @@ def evaluate(
     """Run ``episodes`` episodes seeded ``seed, seed + 1, ...`` and summarise them.
 
     Args:
-        policy: a callable from one observation to one action.
+        policy: a callable from one observation to one action; one with a ``reset()`` method
+            (a recurrent policy) has it called before each episode, as has ``opponent``.
         env_id: the environment.
         env_kwargs: its options, as keyword arguments of ``gymnasium.make``.
         opponent: for two-player envs, the away side's policy (None: the env's default;
@@ -147,7 +151,9 @@ def evaluate(
         kwargs.setdefault("render_width", 640)
         kwargs.setdefault("render_height", 360)
     env = gym.make(env_id, **kwargs)
-    writer = None
+    # In render_mode="rgb_array", render() gives an (H, W, 3) array.
+    render = cast("Callable[[], np.ndarray]", env.render)
+    writer: _VideoWriter | None = None
     try:
         _check_fits(policy, policy_name, env_id, env)
         if opponent is not None and not isinstance(opponent, str):
@@ -159,7 +165,7 @@ def evaluate(
         raise
     if opponent is not None:
         try:
-            env.unwrapped.set_opponent(opponent)
+            cast("FoosballEnv", env.unwrapped).set_opponent(opponent)
         except Exception:
             env.close()
             raise
@@ -167,26 +173,27 @@ def evaluate(
     successes = goals_for = goals_against = serves = off_table = 0
     try:
         for i in range(episodes):
+            start_episode(policy, None if isinstance(opponent, str) else opponent)
             obs, info = env.reset(seed=seed + i)
-            record = writer is not None and i < video_episodes
-            if record:
-                writer.add(env.render)
+            recorder = writer if i < video_episodes else None
+            if recorder is not None:
+                recorder.add(render)
             total, steps, done = 0.0, 0, False
             serves += 1
             while not done:
                 obs, reward, terminated, truncated, info = env.step(policy(obs))
-                total += reward
+                total += float(reward)
                 steps += 1
                 done = terminated or truncated
                 off_table += bool(info.get("out_of_table"))
                 ended = info["goal"] or info.get("out_of_table") or info.get("stagnated")
                 serves += bool(ended) and not done
-                if record:
-                    writer.add(env.render)
-            if record:
-                writer.end_episode(env.render)
+                if recorder is not None:
+                    recorder.add(render)
+            if recorder is not None:
+                recorder.end_episode(render)
                 if i + 1 == video_episodes:
-                    writer.close()
+                    recorder.close()
                     writer = None
             rewards.append(total)
             lengths.append(steps)
@@ -223,9 +230,20 @@ def evaluate(
     )
 
 
+def start_episode(*policies: Policy | None) -> None:
+    """Tell the policies an episode starts: those that carry a state from step to step
+    (a recurrent one) have a ``reset()`` that forgets it."""
+    for policy in policies:
+        reset = getattr(policy, "reset", None)
+        if callable(reset):
+            reset()
+
+
 def _check_fits(policy: Policy, name: str, env_id: str, env: gym.Env) -> None:
     expected = getattr(policy, "observation_size", None)
-    size = int(np.prod(env.observation_space.shape))
+    shape = env.observation_space.shape
+    assert shape is not None  # the environments observe a Box
+    size = int(np.prod(shape))
     if expected is not None and expected != size:
         trained = getattr(policy, "env_id", None)
         of = f" of {trained}" if trained else ""
@@ -328,13 +346,13 @@ class _Mp4Writer(_VideoWriter):
             ) from err
         super().__init__(path, fps, stride)
         self._cv2 = cv2
-        self._writer = None
+        self._writer: cv2.VideoWriter | None = None
         self._last: np.ndarray | None = None
 
     def _write(self, frame: np.ndarray) -> None:
         if self._writer is None:
             h, w = frame.shape[:2]
-            fourcc = self._cv2.VideoWriter_fourcc(*"mp4v")
+            fourcc = self._cv2.VideoWriter.fourcc(*"mp4v")
             self._writer = self._cv2.VideoWriter(self.path, fourcc, self.fps, (w, h))
             if not self._writer.isOpened():
                 raise OSError(f"cannot write a video to {self.path}")
@@ -342,6 +360,8 @@ class _Mp4Writer(_VideoWriter):
         self._writer.write(self._last)
 
     def _hold(self, seconds: float) -> None:
+        if self._writer is None or self._last is None:
+            return
         for _ in range(round(seconds * self.fps)):
             self._writer.write(self._last)
 

@@ -8,6 +8,8 @@ instead. The game only calls the :class:`~foosball_gym.sim.TableSim` it is given
 
 from __future__ import annotations
 
+import copy
+import pickle
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -245,3 +247,71 @@ class Game:
         """Re-read the rods and the ball from the simulator."""
         self.positions, self.velocities = self.sim.joint_states()
         self.ball = self.sim.ball_xy()
+
+    # ------------------------------------------------------------------ copies
+
+    def __getstate__(self) -> dict[str, Any]:
+        """A pickled game carries its opponent: as it is where pickle takes it, by value
+        (cloudpickle) where pickle cannot (a lambda, a local function), else a TypeError
+        names it. The simulator copies itself (see ``TableSim.__getstate__``)."""
+        state = self.__dict__.copy()
+        state["_opponent"] = portable(self._opponent)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        state["_opponent"] = unpacked(state["_opponent"])
+        self.__dict__.update(state)
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> Game:
+        # As deepcopy would copy it without __getstate__: a function opponent stays itself.
+        copied = Game.__new__(Game)
+        memo[id(self)] = copied
+        copied.__dict__.update(copy.deepcopy(self.__dict__, memo))
+        return copied
+
+
+@dataclass(frozen=True)
+class _ByValue:
+    """An opponent pickled by cloudpickle (pickle reads it back, cloudpickle installed)."""
+
+    data: bytes
+
+
+# The opponents being pickled here: one that holds its own game meets itself again there, and
+# is left to the pickler at work.
+_TRYING: set[int] = set()
+
+
+def portable(policy: Policy | None) -> Policy | _ByValue | None:
+    """``policy`` as pickle can take it: itself, or its bytes from cloudpickle (which
+    :func:`unpacked` reads back); a TypeError names one that neither can take."""
+    if policy is None or id(policy) in _TRYING:
+        return policy
+    _TRYING.add(id(policy))
+    try:
+        return _pickled(policy)
+    finally:
+        _TRYING.discard(id(policy))
+
+
+def unpacked(value: Any) -> Any:
+    """What :func:`portable` was given."""
+    return pickle.loads(value.data) if isinstance(value, _ByValue) else value
+
+
+def _pickled(policy: Policy) -> Policy | _ByValue:
+    try:
+        pickle.dumps(policy)
+        return policy
+    except Exception:
+        pass
+    import cloudpickle  # only for what pickle cannot take
+
+    try:
+        return _ByValue(cloudpickle.dumps(policy))
+    except Exception as err:
+        raise TypeError(
+            f"cannot copy the game: its opponent {policy!r} cannot be pickled ({err}); set an "
+            "opponent that pickles (a module-level function or an instance of a module-level "
+            "class), or set_opponent(None) for the scripted team, before copying"
+        ) from err

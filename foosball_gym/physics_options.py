@@ -21,9 +21,8 @@ def check_physics(
     Raises:
         ValueError: naming the option and the values it allows.
     """
-    for name, value in (("physics_hz", physics_hz), ("control_hz", control_hz)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
-            raise ValueError(f"{name} must be a positive integer (Hz), got {value!r}")
+    physics_hz = _rate("physics_hz", physics_hz)
+    control_hz = _rate("control_hz", control_hz)
     if physics_hz < control_hz:
         raise ValueError(
             f"physics_hz ({physics_hz}) must be at least control_hz ({control_hz}): the "
@@ -34,18 +33,33 @@ def check_physics(
             f"physics_hz ({physics_hz}) must be a whole multiple of control_hz ({control_hz}), "
             f"e.g. {control_hz * max(1, round(physics_hz / control_hz))}"
         )
+    numbers = []
     for name, value, low, high in (
         ("contact_travel", contact_travel, 1e-4, 0.02),
         ("rolling_resistance", rolling_resistance, 0.0, 0.5),
     ):
         try:
+            # Whatever was given: float() is what tells whether it is a number.
             number = float(value)  # type: ignore[arg-type]
         except (TypeError, ValueError):
             number = math.nan
         if isinstance(value, bool) or not low <= number <= high:
             unit = " m" if name == "contact_travel" else ""
             raise ValueError(f"{name} must be a number in [{low}, {high}]{unit}, got {value!r}")
-    return int(physics_hz), int(control_hz), float(contact_travel), float(rolling_resistance)
+        numbers.append(number)
+    contact, rolling = numbers
+    return physics_hz, control_hz, contact, rolling
+
+
+def _rate(name: str, value: object) -> int:
+    """``value`` as a positive whole number of Hz.
+
+    Raises:
+        ValueError: naming the option if it is not one.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+        raise ValueError(f"{name} must be a positive integer (Hz), got {value!r}")
+    return int(value)
 
 
 #: The physics options every environment takes, with their defaults, in check_physics' order.

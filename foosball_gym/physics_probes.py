@@ -413,6 +413,7 @@ def volley(sim: TableSim, speed: float, angle_deg: float) -> dict:
             if swing and bvx > 0 and x > KEEPER.x + 0.04:
                 left_at, last_clean = k, now
             continue
+        assert last_clean is not None  # set with left_at
         if _bounced(last_clean, now, cdt) or abs(y) >= WALL_Y - 0.002:
             break
         last_clean = now

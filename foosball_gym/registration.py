@@ -14,7 +14,7 @@ import inspect
 import textwrap
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 from gymnasium.envs.registration import load_env_creator, register, registry
@@ -26,6 +26,9 @@ from foosball_gym.tasks.block import BlockTask
 from foosball_gym.tasks.full_game import FullGameTask
 from foosball_gym.tasks.keeper_vs_keeper import KeeperVsKeeperTask
 from foosball_gym.tasks.score import ScoreTask
+
+if TYPE_CHECKING:
+    from foosball_gym.envs.base import FoosballEnv
 
 __version__ = "0.1.0"
 
@@ -169,7 +172,7 @@ def describe_envs() -> str:
     lines = []
     for entry in ENVS:
         env = gym.make(entry.id)
-        cls = type(env.unwrapped)
+        cls = type(cast("FoosballEnv", env.unwrapped))
         lines.append(
             f"{entry.id}  ({entry.max_episode_steps} steps, action {env.action_space.shape}"
             f", observation {env.observation_space.shape})"

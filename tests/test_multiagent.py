@@ -1,20 +1,26 @@
 """The two-player tasks as PettingZoo parallel games: the API, seeding, agreement with the
-single-agent env, each side's rewards and the optional dependency."""
+single-agent env, each side's rewards, the true state, copies (and SuperSuit's vector envs,
+which make them) and the optional dependency."""
 
 from __future__ import annotations
 
 import ast
+import copy
+import pickle
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
+import cloudpickle
 import gymnasium as gym
 import numpy as np
 import pytest
 
 pytest.importorskip("pettingzoo", reason="the multi-agent games need the 'distributed' extra")
 
-from pettingzoo.test import parallel_api_test, parallel_seed_test  # noqa: E402
+from pettingzoo.test import parallel_api_test, parallel_seed_test, state_test  # noqa: E402
+from pettingzoo.utils.conversions import parallel_to_aec  # noqa: E402
 
 from foosball_gym import table  # noqa: E402
 from foosball_gym.envs.rewards import (  # noqa: E402
@@ -315,3 +321,140 @@ def test_the_game_refuses_an_away_action_where_there_is_no_away_side(make_env):
     env.reset(seed=0)
     with pytest.raises(ValueError, match="no opponent to command"):
         env.unwrapped.game.command([0.0], [0.0])
+
+
+# ------------------------------------------------------------------ the true state
+
+
+@pytest.mark.parametrize("env_id", GAME_IDS)
+def test_passes_the_pettingzoo_state_test_without_a_warning(env_id, make_game):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        state_test(parallel_to_aec(make_game(env_id)), make_game(env_id), num_cycles=100)
+
+
+def test_the_state_is_the_true_state_whatever_the_observation_options(make_game):
+    env_id = "Foosball-FullGame-v0"
+    plain = make_game(env_id)
+    other = make_game(env_id, observe_figurines=True, joint_velocities=False)
+    names = plain.state_names
+    assert other.state_names == names and len(names) == 4 * 8 + 6
+    assert plain.state_space == other.state_space
+    rng = np.random.default_rng(1)
+    plain.reset(seed=5)
+    other.reset(seed=5)
+    for _ in range(60):
+        actions = random_actions(plain, rng)
+        plain.step(actions)
+        other.step(actions)
+        state = plain.state()
+        np.testing.assert_array_equal(other.state(), state)
+        assert plain.state_space.contains(state)
+        env = plain.single_agent_env
+        positions, velocities = env.rod_joint_values()
+        ball = env.sim.ball_state()
+        value = dict(zip(names, state.tolist()))
+        for i, rod in enumerate(env.layout.rods):
+            assert value[f"{rod}_slide_pos"] == np.float32(positions[i])
+            assert value[f"{rod}_spin_vel"] == np.float32(velocities[8 + i])
+        assert [value[f"ball_{a}"] for a in ("x", "y", "z", "vx", "vy", "vz")] == [
+            np.float32(v) for v in (*ball.position, *ball.velocity)
+        ]
+        if not plain.agents:
+            break
+
+
+# ------------------------------------------------------------------ copies
+
+COPIERS = {
+    "pickle": lambda game: pickle.loads(pickle.dumps(game)),
+    "cloudpickle": lambda game: cloudpickle.loads(cloudpickle.dumps(game)),
+    "deepcopy": copy.deepcopy,
+}
+
+
+def assert_same_step(a: tuple, b: tuple) -> None:
+    for agent in AGENTS:
+        np.testing.assert_array_equal(a[0][agent], b[0][agent])
+    assert a[1:] == b[1:]
+
+
+@pytest.mark.parametrize("how", list(COPIERS))
+@pytest.mark.parametrize("env_id", GAME_IDS)
+def test_a_copied_game_plays_as_the_original_would_and_apart_from_it(env_id, how, make_game):
+    game = make_game(env_id, max_cycles=50)
+    rng = np.random.default_rng(2)
+    game.reset(seed=2)
+    for _ in range(20):
+        game.step(random_actions(game, rng))
+    twin = COPIERS[how](game)
+    try:
+        np.testing.assert_array_equal(twin.state(), game.state())
+        for seed in range(40, 43):
+            while game.agents:
+                actions = random_actions(game, rng)
+                assert_same_step(twin.step(actions), game.step(actions))
+                np.testing.assert_array_equal(twin.state(), game.state())
+            assert twin.agents == []
+            assert_same_step(twin.reset(seed=seed), game.reset(seed=seed))
+        game.close()
+        twin.step(random_actions(twin, rng))
+    finally:
+        twin.close()
+
+
+def supersuit_seeds(seed: int, copies: int, num_cpus: int) -> list[int]:
+    """The seed each copy of SuperSuit's vector env is reset with by ``reset(seed=seed)``:
+    each process adds its index to the seed, and each copy within it its own."""
+    if num_cpus <= 1:
+        return [seed + k for k in range(copies)]
+    per_process = -(-copies // num_cpus)
+    return [seed + k // per_process + k % per_process for k in range(copies)]
+
+
+@pytest.mark.parametrize("num_cpus", [1, 2])
+def test_the_supersuit_recipe_plays_each_copy_as_a_game_of_its_own(num_cpus):
+    """PettingZoo's Stable-Baselines3 recipe: SuperSuit copies the game by pickling it, then
+    steps the copies in this process or in others. Each copy's rows must be what a game made
+    apart gives for the same seed and actions, through the resets that end its episodes."""
+    import supersuit as ss
+
+    env_id, copies, cycles, seed = "Foosball-KeeperVsKeeper-v0", 4, 25, 7
+    game = parallel_env(env_id, max_cycles=cycles)
+    game.reset(seed=123)  # the copies are of a game in play
+    vec = ss.concat_vec_envs_v1(
+        ss.pettingzoo_env_to_vec_env_v1(game),
+        copies,
+        num_cpus=num_cpus,
+        base_class="stable_baselines3",
+    )
+    apart = [parallel_env(env_id, max_cycles=cycles) for _ in range(copies)]
+    try:
+        # SB3's reset(seed) does not reach SuperSuit's copies; its own vector env's does.
+        obs, _ = vec.venv.reset(seed=seed)
+        expected = [
+            g.reset(seed=s)[0] for g, s in zip(apart, supersuit_seeds(seed, copies, num_cpus))
+        ]
+        rng = np.random.default_rng(0)
+        ended = 0
+        for _ in range(2 * cycles + 10):
+            for k, agent in enumerate(AGENTS * copies):
+                np.testing.assert_array_equal(obs[k], expected[k // 2][agent])
+            actions = rng.uniform(-1, 1, (2 * copies, 2)).astype(np.float32)
+            obs, rewards, dones, _ = vec.step(actions)
+            expected = []
+            for k, g in enumerate(apart):
+                step = g.step({a: actions[2 * k + i] for i, a in enumerate(AGENTS)})
+                done = not g.agents
+                assert dones[2 * k : 2 * k + 2].tolist() == [done, done]
+                assert rewards[2 * k : 2 * k + 2].tolist() == [
+                    np.float32(step[1][a]) for a in AGENTS
+                ]
+                # SuperSuit restarts an ended game at once, from its own random generator.
+                expected.append(g.reset()[0] if done else step[0])
+                ended += done
+        assert ended >= copies, "every copy should end an episode and start the next"
+    finally:
+        vec.close()
+        for g in apart:
+            g.close()

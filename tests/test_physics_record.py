@@ -19,7 +19,11 @@ import foosball_gym  # noqa: E402
 from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.table import PHYSICS_REVISION  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
-from foosball_gym.training.loading import PhysicsMismatchWarning, load_policy  # noqa: E402
+from foosball_gym.training.loading import (  # noqa: E402
+    PhysicsMismatchWarning,
+    UnknownPhysicsWarning,
+    load_policy,
+)
 from foosball_gym.training.run_dir.physics import physics_record  # noqa: E402
 from foosball_gym.training.sb3.trainer import train  # noqa: E402
 
@@ -96,12 +100,18 @@ def test_a_model_trained_on_older_physics_warns_naming_both_revisions(
     assert "may differ" in message and "Retraining" in message
 
 
-def test_a_bare_model_zip_counts_as_the_first_revision(trained, tmp_path):
+def test_a_bare_model_zip_s_revision_is_unknown_not_the_first(trained, tmp_path):
+    # A zip with no run's config.json beside it may come from anywhere, from today's physics
+    # as well: no revision is claimed for it.
     bare = tmp_path / "bare" / "model.zip"
     bare.parent.mkdir()
     shutil.copy(trained[0] / "model.zip", bare)
-    with pytest.warns(PhysicsMismatchWarning, match=f"revision 1.*revision {PHYSICS_REVISION}"):
+    with pytest.warns(UnknownPhysicsWarning) as caught:
         load_policy(bare)
+    assert len(caught) == 1
+    message = str(caught[0].message)
+    assert str(bare) in message and "unknown" in message
+    assert f"revision {PHYSICS_REVISION}" in message and "revision 1" not in message
 
 
 @pytest.mark.parametrize("record", ["current", "revision 1", "none"])
@@ -124,13 +134,25 @@ def test_resuming_warns_on_other_physics_and_keeps_the_run_s_record(trained, tmp
     assert (run / "config.json").read_text() == before
 
 
-@pytest.mark.parametrize("command", ["eval", "play"])
+@pytest.mark.parametrize("command", ["eval", "play", "eval a bare zip"])
 def test_the_cli_shows_the_warning_once(trained, tmp_path, command):
     if command == "play":
         pytest.importorskip("canopen")
     run = copy_with_record(trained[0], tmp_path / "old", "none")
+    warning = "PhysicsMismatchWarning"
+    if command == "eval a bare zip":
+        (tmp_path / "bare").mkdir()
+        run = Path(shutil.copy(run / "model.zip", tmp_path / "bare" / "model.zip"))
+        command, warning = "eval", "UnknownPhysicsWarning: "
     args = {
-        "eval": ["--episodes", "1", "--json", str(tmp_path / "eval.json")],
+        "eval": [
+            "--env",
+            "Foosball-Block-v0",
+            "--episodes",
+            "1",
+            "--json",
+            str(tmp_path / "e.json"),
+        ],
         "play": ["--table", "sim", "--episodes", "1", "--camera", "320x180", "--no-status"],
     }[command]
     # A fresh interpreter with Python's default warning filters, as a user's shell runs it.
@@ -145,5 +167,5 @@ def test_the_cli_shows_the_warning_once(trained, tmp_path, command):
         timeout=300,
     )
     assert done.returncode == 0, done.stderr
-    assert done.stderr.count("PhysicsMismatchWarning") == 1, done.stderr
+    assert done.stderr.count(warning) == 1, done.stderr
     assert f"revision {PHYSICS_REVISION}" in done.stderr

@@ -109,6 +109,17 @@ def test_policy_file_that_disagrees_with_its_description_is_refused(tmp_path):
         load_rllib_policy(tmp_path / "missing")
 
 
+def test_policy_file_with_a_mean_but_no_spread_is_refused_as_it_loads(tmp_path):
+    """Normalising needs both statistics: a description that gives one is refused as it loads,
+    not at the policy's first action."""
+    export_policy(module_state(), tmp_path, env_id=ENV, env_kwargs={})
+    info = json.loads((tmp_path / POLICY_INFO_FILE).read_text())
+    info["obs_mean"] = [0.0] * 10
+    (tmp_path / POLICY_INFO_FILE).write_text(json.dumps(info))
+    with pytest.raises(ValueError, match="obs_mean and obs_std"):
+        load_rllib_policy(tmp_path)
+
+
 def test_opponent_is_replaced_by_the_rule_both_backends_share(tmp_path):
     def pool(rule):
         config = TrainConfig(ENV, selfplay_window=4, selfplay_rule=rule, selfplay_threshold=0.2)

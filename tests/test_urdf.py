@@ -155,6 +155,7 @@ def test_wheel_ships_the_urdf_and_the_cli_and_an_installed_copy_runs(tmp_path):
     assert "foosball_gym/urdf/ball.urdf" in names
     assert "foosball_gym/urdf/figurine_leg.obj" in names
     assert "foosball_gym/policies/deflection_table.npz" in names
+    assert "foosball_gym/rl_zoo/ppo.yml" in names
     shipped_cli = {n for n in names if n.startswith("foosball_gym/cli/")}
     assert shipped_cli == {f"foosball_gym/cli/{p.name}" for p in (ROOT / "cli").glob("*.py")}
     site = tmp_path / "site"

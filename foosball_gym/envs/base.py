@@ -8,8 +8,9 @@ actions, observations, reward terms, info, rendering, seeding and domain randomi
 
 from __future__ import annotations
 
+import copy
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -21,12 +22,15 @@ from foosball_gym.envs import options as env_options
 from foosball_gym.envs.estimated import CameraNoise, EstimatedState
 from foosball_gym.envs.options import RENDER_MODES
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
-from foosball_gym.game import Game, Policy
+from foosball_gym.game import Game, Outcome, Policy, portable, unpacked
 from foosball_gym.policy_io.observations import check_flag, observation_options
 from foosball_gym.policy_io.task import TaskInterface, check_action, residual_action
 from foosball_gym.tasks.base import Task, check_ball_position, check_pair
 
 __all__ = ["RENDER_MODES", "FoosballEnv"]
+
+# What a reset reports: no goal, no dead ball and no reward yet.
+_NOTHING_YET = Outcome(goal=0, out_of_table=False, stagnated=False)
 
 
 class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -74,7 +78,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
       5 cm/s) for this many steps; 0 never does.
 
     Domain randomisation, each off at `None`; a range `(low, high)` turns it on, drawn
-    uniformly at every reset (the values drawn are in the reset's `info["dynamics"]`):
+    uniformly at every reset (the values drawn are in `info["dynamics"]`, from the reset and
+    every step of the episode):
 
     - `ball_friction_range`: the ball's friction coefficient (the table's is 0.1), within
       [0, 10].
@@ -118,6 +123,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": table.CONTROL_HZ}
+    observation_space: spaces.Box
+    action_space: spaces.Box
 
     def __new__(cls, *args: Any, **options: Any) -> FoosballEnv:
         cls.check_option_names(options)
@@ -228,6 +235,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         # Residual RL: the action corrects the scripted baseline, which sees what the agent saw.
         self._baseline = self.scripted_policy() if self.residual else None
         self._last_obs: np.ndarray | None = None
+        # This episode's drawn physical parameters (domain randomisation), for every info.
+        self._dynamics: dict[str, float] = {}
         self._rewards = RewardComputer(self.weights, [table.rod(r) for r in layout.controlled])
 
         # Imported here: building a task's interface needs no simulator. The simulator checks
@@ -321,7 +330,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             ball_position = check_ball_position("ball_position", ball_position)
         if ball_velocity is not None:
             ball_velocity = check_pair("ball_velocity", ball_velocity)
-        dynamics = self._randomise_dynamics()
+        self._dynamics = self._randomise_dynamics()
         if self._estimated is not None:
             self._estimated.rng = self.np_random
         self._start(self.task.sample_start(self.np_random, ball_position, ball_velocity, options))
@@ -329,9 +338,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self._elapsed = 0
         self._match_steps = self.task.match_steps(self.sim.control_hz)
         obs = self._last_obs = self._observe()
-        info = {"goal": 0, "is_success": self.game.success, **self._score_info()}
-        if dynamics:
-            info["dynamics"] = dynamics
+        info = self.step_info(_NOTHING_YET, dict.fromkeys(TERMS, 0.0))
         if self.render_mode == "human":
             self.render()
         return obs, info
@@ -375,6 +382,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise gym.error.ResetNeeded("call reset() before step()")
         act = check_action(action, self._n_act, "action")
         if self._baseline is not None:
+            assert self._last_obs is not None  # reset() sets it before any step
             base = self._baseline(self._last_obs)
             act = [float(a) for a in residual_action(base, self.residual, act)]
         game = self.game
@@ -399,15 +407,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             act,
             terminated,
         )
-        info = {
-            "goal": outcome.goal,
-            "is_success": game.success,
-            "out_of_table": outcome.out_of_table,
-            "stagnated": outcome.stagnated,
-            **self._score_info(),
-        }
-        for name in TERMS:
-            info["reward_" + name] = terms[name]
+        info = self.step_info(outcome, terms)
         if continuous and not decided:
             goals = game.goals_for, game.goals_against
             self._start(self.task.sample_start(self.np_random))
@@ -417,7 +417,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             self.render()
         return obs, float(sum(terms.values())), terminated, time_up and not terminated, info
 
-    def render(self) -> np.ndarray | None:
+    # gymnasium returns a TypeVar bound to nothing from render(), which no frame type matches.
+    def render(self) -> np.ndarray | None:  # type: ignore[override]
         if self.render_mode == "rgb_array":
             return self.sim.render(self.render_width, self.render_height)
         if self.render_mode == "human":
@@ -434,15 +435,54 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         if sim is not None:
             sim.close()
 
+    # ------------------------------------------------------------------ copies
+
+    def __getstate__(self) -> dict[str, Any]:
+        # A copy is an env of its own: the game and its simulator copy themselves. gym.make
+        # keeps the opponent among the spec's kwargs too; it is copied as the game copies it.
+        state = self.__dict__.copy()
+        spec = state.get("spec")
+        if spec is not None and spec.kwargs.get("opponent") is not None:
+            spec = state["spec"] = copy.copy(spec)
+            spec.kwargs = {**spec.kwargs, "opponent": portable(spec.kwargs["opponent"])}
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        spec = state.get("spec")
+        if spec is not None and "opponent" in spec.kwargs:
+            spec.kwargs["opponent"] = unpacked(spec.kwargs["opponent"])
+        self.__dict__.update(state)
+
     # ------------------------------------------------------------------ helpers
 
     def _controlled_slides(self) -> list[float]:
         return self.game.positions[: len(self.layout.controlled)]
 
-    def _score_info(self) -> dict[str, Any]:
-        if not self.layout.opponent:
-            return {}
-        return {"goals_for": self.game.goals_for, "goals_against": self.game.goals_against}
+    def step_info(self, outcome: Outcome, terms: Mapping[str, float]) -> dict[str, Any]:
+        """The info of a step that brought ``outcome`` and these reward terms.
+
+        A reset's info is that of a step where nothing happened, so that every info of an
+        environment has the same keys with values of the same types: recorders of infos (such
+        as Minari's ``DataCollector``) need that.
+
+        Args:
+            outcome: what the step brought.
+            terms: the step's reward terms, keyed by name.
+        """
+        game = self.game
+        info: dict[str, Any] = {
+            "goal": int(outcome.goal),
+            "is_success": bool(game.success),
+            "out_of_table": bool(outcome.out_of_table),
+            "stagnated": bool(outcome.stagnated),
+        }
+        if self.layout.opponent:
+            info["goals_for"], info["goals_against"] = int(game.goals_for), int(game.goals_against)
+        # Floats always: an integer weight would make some terms ints and others floats.
+        info.update(("reward_" + name, float(terms[name])) for name in TERMS)
+        if self._dynamics:
+            info["dynamics"] = dict(self._dynamics)
+        return info
 
     def rod_joint_values(self) -> tuple[list[float], list[float]]:
         """Joint positions and velocities of the rods in play (all slides, then all spins, in

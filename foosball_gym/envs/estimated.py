@@ -12,12 +12,16 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from foosball_gym import table
 from foosball_gym.camera import CameraNoise
 from foosball_gym.policy_io.observations import ObservationBuilder
+
+if TYPE_CHECKING:
+    from foosball_gym.estimation import TableStateEstimator
 
 __all__ = ["CameraNoise", "EstimatedState"]
 
@@ -41,21 +45,24 @@ class EstimatedState:
                 f"estimated_state needs filterpy ({err.name} is missing): "
                 'pip install "foosball_gym[hardware]"'
             ) from err
-        self._make = lambda: TableStateEstimator(builder, latency_s=noise.latency_s)
+        self._estimator_class = TableStateEstimator
         self.builder = builder
         self.noise = noise
         self.rng = rng
         self.tracked = list(builder.tracked_rods)
         self._slot = {name: builder.rods_in_play.index(name) for name in self.tracked}
-        self.estimator = self._make()
+        self.estimator = self._new_estimator()
         self._pending: deque[tuple[float, tuple[float, float] | None, dict]] = deque()
         self._t = 0.0
         self._next_frame = 0.0
         self._ball_before: Sequence[float] = (0.0, 0.0, 0.0, 0.0)
 
+    def _new_estimator(self) -> TableStateEstimator:
+        return self._estimator_class(self.builder, latency_s=self.noise.latency_s)
+
     def reset(self, ball: Sequence[float], pos: Sequence[float], figurines: np.ndarray) -> None:
         """Start afresh; the first frame is taken now and seen at once."""
-        self.estimator = self._make()
+        self.estimator = self._new_estimator()
         self._pending.clear()
         self._t = 0.0
         self._next_frame = 1.0 / self.noise.fps

@@ -117,6 +117,8 @@ class RewardComputer:
         }
         if w.action_regularisation:
             last = self._last_action
+            if last is None:
+                raise RuntimeError("call reset() before step()")
             diff = sum((a - b) ** 2 for a, b in zip(action, last)) / max(len(action), 1)
             terms["action_regularisation"] = -w.action_regularisation * diff
         self._last_action = list(action)

@@ -219,7 +219,7 @@ class JointConfig:
         """A joint value (m or rad) as a drive position in increments."""
         return round(self.offset + self.direction * self.increments_per_unit * value)
 
-    def from_increments(self, increments: int) -> float:
+    def from_increments(self, increments: float) -> float:
         """A drive position in increments as a joint value (m or rad)."""
         return (increments - self.offset) / (self.direction * self.increments_per_unit)
 

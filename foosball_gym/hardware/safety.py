@@ -82,6 +82,9 @@ class JointLimits:
     @classmethod
     def of(cls, joint: JointConfig) -> JointLimits:
         """The limits of a configured joint: the table's limit minus the joint's margin."""
+        # JointConfig fills in the defaults of those left None.
+        assert joint.limit_margin is not None and joint.max_speed is not None
+        assert joint.max_acceleration is not None
         reach = joint.hard_limit - joint.limit_margin
         return cls(-reach, reach, joint.max_speed, joint.max_acceleration)
 
@@ -195,6 +198,7 @@ class Watchdog:
         """Raise :class:`WatchdogTripped` if armed and something is too old."""
         if self.last_command is None:
             return
+        assert self.last_state is not None  # the first command sets it, if nothing had
         for what, last in (("command", self.last_command), ("state estimate", self.last_state)):
             age = now - last
             if age > self.timeout:

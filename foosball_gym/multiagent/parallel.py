@@ -19,6 +19,7 @@ from pettingzoo import ParallelEnv
 from foosball_gym import table
 from foosball_gym.envs.base import RENDER_MODES, FoosballEnv
 from foosball_gym.envs.rewards import TERMS, RewardComputer
+from foosball_gym.multiagent.state import TrueState
 from foosball_gym.policy_io.observations import check_flag, mirrored_builder
 from foosball_gym.policy_io.task import check_action
 from foosball_gym.registration import ENV_IDS, TASKS
@@ -59,6 +60,11 @@ class FoosballParallelEnv(ParallelEnv):
     agent's is the single-agent observation; the away agent's is the mirrored one the
     single-agent env gives its opponent (its own rods first, ball coordinates negated).
 
+    ## State
+    ``state()``, in ``state_space``: the full true state for a centralised critic, whatever
+    the observation options: each rod's slide and spin position, then their velocities, then
+    the ball's x, y, z, vx, vy, vz, in the world (home) frame (``state_names`` names them).
+
     ## Rewards
     Each agent gets the single-agent terms of its own side: ``out_of_table``,
     ``ball_to_goal``, ``figurine_to_ball`` and ``action_regularisation`` are computed for the
@@ -82,6 +88,10 @@ class FoosballParallelEnv(ParallelEnv):
     ``env_id`` and every keyword of the single-agent env except ``opponent`` (the away agent
     is the opponent) and ``estimated_state=True`` (the away side has no simulated camera);
     ``max_cycles``.
+
+    ## Copies
+    A pickled or deep-copied game is a game of its own in the same state, which steps as this
+    one would given the same actions (SuperSuit's vector envs copy the game so).
     """
 
     metadata = {
@@ -109,14 +119,16 @@ class FoosballParallelEnv(ParallelEnv):
         if not isinstance(max_cycles, (int, np.integer)) or max_cycles <= 0:
             raise ValueError(f"max_cycles must be a positive integer, got {max_cycles!r}")
         self.max_cycles = int(max_cycles)
+        assert isinstance(spec.entry_point, str)  # registered as "module:Class"
         env = load_env_creator(spec.entry_point)(**{**spec.kwargs, **env_kwargs})
+        assert isinstance(env, FoosballEnv)  # GAME_IDS are this package's environments
         self._env: FoosballEnv = env
         # A match's own length ends it sooner (the limit caps it: a longer one is refused).
         match = env.task.match_steps(env.sim.control_hz)
         if match is not None and match > self.max_cycles:
             env.close()
             raise ValueError(
-                f"match_seconds={env.task.match_seconds} is {match} steps, longer than "
+                f"the match lasts {match} steps (match_seconds), longer than "
                 f"max_cycles={self.max_cycles}: give max_cycles={match} or more"
             )
         self._match_steps = self.max_cycles if match is None else match
@@ -151,6 +163,9 @@ class FoosballParallelEnv(ParallelEnv):
             "away": slice(n_home, n_home + len(layout.opponent)),
         }
         self._steps = 0
+        self._true_state = TrueState(layout.rods)
+        #: The space of :meth:`state`.
+        self.state_space = self._true_state.space
 
     # ------------------------------------------------------------------ spaces
 
@@ -238,17 +253,10 @@ class FoosballParallelEnv(ParallelEnv):
                 terminal,
             ),
         }
-        home_info = {
-            "goal": outcome.goal,
-            "is_success": game.success,
-            "out_of_table": outcome.out_of_table,
-            "stagnated": outcome.stagnated,
-            "goals_for": game.goals_for,
-            "goals_against": game.goals_against,
-        }
+        # The single-agent env's info, which has the keys and types of its reset's.
+        home_info = env.step_info(outcome, terms["home"])
         infos = {"home": home_info, "away": self._away_info(home_info)}
-        for agent in AGENTS:
-            infos[agent].update({"reward_" + name: terms[agent][name] for name in TERMS})
+        infos["away"].update(("reward_" + name, float(terms["away"][name])) for name in TERMS)
         if continuous and not decided:
             goals = game.goals_for, game.goals_against
             game.start(env.task.sample_start(env.np_random))
@@ -267,6 +275,17 @@ class FoosballParallelEnv(ParallelEnv):
         if self.render_mode == "human":
             env.render()
         return observations, rewards, terminations, truncations, infos
+
+    def state(self) -> np.ndarray:
+        """The full true state, the same for both agents: every joint of the rods in play and
+        the ball in three dimensions, in the world frame (names: ``state_names``)."""
+        game = self._env.game
+        return self._true_state.build(game.positions, game.velocities, self._env.sim.ball_state())
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        """What each entry of :meth:`state` is, e.g. ``"home_keeper_slide_vel"``, ``"ball_z"``."""
+        return self._true_state.names
 
     def render(self) -> np.ndarray | None:
         return self._env.render()

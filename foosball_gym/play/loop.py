@@ -138,7 +138,8 @@ class PlayLoop:
         pixel, ball = None, None
         if detection is not None:
             pixel = (float(detection.u), float(detection.v))
-            ball = tuple(float(v) for v in self.calibration.pixel_to_table(np.array(pixel)))
+            x, y = self.calibration.pixel_to_table(np.array(pixel))
+            ball = (float(x), float(y))
         slides = {}
         if self.rod_tracker is not None and frame is not None:
             slides = dict(self.rod_tracker(frame))

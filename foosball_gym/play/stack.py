@@ -28,6 +28,7 @@ from foosball_gym.play.session import SessionLog
 from foosball_gym.policy_io.task import TaskInterface
 from foosball_gym.table import rod
 from foosball_gym.vision import (
+    BallDetector,
     CameraCalibration,
     ColourBallDetector,
     OnnxBallDetector,
@@ -113,7 +114,7 @@ def collector_paused_for_old_objects() -> Any:
 
 def build_perception(
     config: TableConfig, interface: TaskInterface, latency_s: float | None
-) -> tuple[Any, Any, Callable[[np.ndarray], dict] | None, Any]:
+) -> tuple[BallDetector, CameraCalibration, TableStateEstimator, RodTracker | None]:
     """Detector, calibration, estimator and rod tracker (None without an opponent) from a
     table configuration: the perception arguments of :class:`PlayLoop`, in its order."""
     vision, camera, estimation = config.vision, config.camera, config.estimation
@@ -124,7 +125,7 @@ def build_perception(
         )
     calibration = CameraCalibration.from_dict(camera["calibration"])
     if vision.get("detector", "colour") == "onnx":
-        detector = OnnxBallDetector(vision["onnx_model"], **vision.get("onnx", {}))
+        detector: BallDetector = OnnxBallDetector(vision["onnx_model"], **vision.get("onnx", {}))
     else:
         detector = ColourBallDetector(**vision.get("ball", {}))
     # The camera follows the opponent's rods, and still obstacles where a task has them.
@@ -286,6 +287,7 @@ def play_sim(
     header = _header(interface, config, env_id, env_kwargs)
     on_record, log = _recorders(report, log_path, header, status)
     max_steps = gym.spec(env_id).max_episode_steps
+    assert max_steps is not None  # every id is registered with its time limit
     try:
         # Supervision runs on the table's clock: simulated time in lock-step, where a slow
         # frame is no silence on the table, and the wall clock in real time.

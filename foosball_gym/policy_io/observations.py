@@ -163,7 +163,7 @@ class ObservationBuilder:
             take.append(self._index[rod_name])
         self.names: tuple[str, ...] = tuple(names)
         self._take = take
-        self._getter = itemgetter(*take) if take else None
+        self._getter = itemgetter(*take)  # never empty: the ball's four entries are in it
 
         low = np.empty(len(names), dtype=np.float32)
         for i, name in enumerate(names):

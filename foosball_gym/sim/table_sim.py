@@ -35,6 +35,7 @@ import contextlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -234,13 +235,13 @@ class TableSim:
             slide, spin: joint values per rod in play (default 0).
             ball_position, ball_velocity: see :meth:`place_ball`.
         """
-        slide = np.zeros(self._n) if slide is None else np.asarray(slide, dtype=float)
-        spin = np.zeros(self._n) if spin is None else np.asarray(spin, dtype=float)
-        if slide.shape != (self._n,) or spin.shape != (self._n,):
+        slides = np.zeros(self._n) if slide is None else np.asarray(slide, dtype=float)
+        spins = np.zeros(self._n) if spin is None else np.asarray(spin, dtype=float)
+        if slides.shape != (self._n,) or spins.shape != (self._n,):
             raise ValueError(f"slide and spin need one value per rod in play ({self._n})")
         ball = self._ball_from(ball_position, ball_velocity, rolling=False)
         drives = self._drives
-        drives.pos[:] = [float(v) for v in (*slide, *spin)]
+        drives.pos[:] = [float(v) for v in (*slides, *spins)]
         drives.vel[:] = [0.0] * (2 * self._n)
         self._ball_state = ball
         self._worlds.enter(self._worlds.own, (), ball, self._materials())
@@ -490,6 +491,32 @@ class TableSim:
             self._worlds.close()
             if self._view is not None:
                 self._view.close()
+
+    # ----------------------------------------------------------------------------- copies
+
+    def __getstate__(self) -> dict[str, Any]:
+        """A copy (pickle, deepcopy) is a table of its own in the same state: the drives, the
+        ball and the Bullet world that holds it, saved whole so that the copy steps as this
+        table would, bit for bit. A closed table copies as a closed one."""
+        if self.gui:
+            raise TypeError(
+                "a simulated table with the PyBullet GUI open (render_mode='human') cannot be "
+                "copied: PyBullet opens one GUI window per process. Copy one made with "
+                "render_mode=None or 'rgb_array'"
+            )
+        state = {k: v for k, v in self.__dict__.items() if k not in ("_worlds", "_view")}
+        state["_view"] = None  # drawn afresh by the copy, when it is first drawn
+        if not self._closed:
+            state["_ball_state"] = self._ball_full()
+            state["_worlds"] = self._worlds.save()
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        saved = state.pop("_worlds", None)
+        self.__dict__.update(state)
+        if saved is not None:
+            self._worlds = TableWorlds(self.rods, self._drives, self.physics_hz)
+            self._worlds.load(saved, state["_ball_state"], self._materials())
 
     def __del__(self) -> None:
         with contextlib.suppress(Exception):

@@ -65,6 +65,22 @@ def _holds(path: Path, text: str) -> bool:
         return False
 
 
+def _find(element: ET.Element, tag: str) -> ET.Element:
+    """``element``'s first ``tag`` child, which the URDF must have."""
+    found = element.find(tag)
+    if found is None:
+        raise ValueError(f"<{element.tag} name={element.get('name')!r}> has no <{tag}>")
+    return found
+
+
+def _attr(element: ET.Element, name: str) -> str:
+    """``element``'s attribute ``name``, which the URDF must have."""
+    value = element.get(name)
+    if value is None:
+        raise ValueError(f"<{element.tag} name={element.get('name')!r}> has no {name}=")
+    return value
+
+
 def _merge_fixed_links(robot: ET.Element) -> None:
     """Fold every link on a fixed joint (the figurines) into its parent (the rod).
 
@@ -77,33 +93,33 @@ def _merge_fixed_links(robot: ET.Element) -> None:
     children: dict[str, list[ET.Element]] = {}
     for joint in robot.findall("joint"):
         if joint.get("type") == "fixed":
-            children.setdefault(joint.find("parent").get("link"), []).append(joint)
+            children.setdefault(_attr(_find(joint, "parent"), "link"), []).append(joint)
     for parent_name, joints in children.items():
         parent = links[parent_name]
-        inertial = parent.find("inertial")
-        mass = float(inertial.find("mass").get("value"))
-        com = [float(v) for v in inertial.find("origin").get("xyz").split()]
+        inertial = _find(parent, "inertial")
+        mass = float(_attr(_find(inertial, "mass"), "value"))
+        com = [float(v) for v in _attr(_find(inertial, "origin"), "xyz").split()]
         for joint in joints[:1] + joints[:0:-1]:
-            child = links[joint.find("child").get("link")]
-            offset = [float(v) for v in joint.find("origin").get("xyz").split()]
-            if any(float(v) for v in joint.find("origin").get("rpy", "0 0 0").split()):
+            child = links[_attr(_find(joint, "child"), "link")]
+            offset = [float(v) for v in _attr(_find(joint, "origin"), "xyz").split()]
+            if any(float(v) for v in _find(joint, "origin").get("rpy", "0 0 0").split()):
                 raise ValueError(f"fixed joint {joint.get('name')} is turned; not merged")
-            child_inertial = child.find("inertial")
-            child_mass = float(child_inertial.find("mass").get("value"))
+            child_inertial = _find(child, "inertial")
+            child_mass = float(_attr(_find(child_inertial, "mass"), "value"))
             child_com = [
                 float(v) + o
-                for v, o in zip(child_inertial.find("origin").get("xyz").split(), offset)
+                for v, o in zip(_attr(_find(child_inertial, "origin"), "xyz").split(), offset)
             ]
             total = mass + child_mass
             com = [(mass * a + child_mass * b) * (1 / total) for a, b in zip(com, child_com)]
             mass = total
             for element in child:
                 if element.tag in ("visual", "collision"):
-                    origin = element.find("origin")
-                    xyz = [float(v) for v in origin.get("xyz").split()]
+                    origin = _find(element, "origin")
+                    xyz = [float(v) for v in _attr(origin, "xyz").split()]
                     origin.set("xyz", " ".join(repr(v + o) for v, o in zip(xyz, offset)))
                     parent.append(element)
             robot.remove(child)
             robot.remove(joint)
-        inertial.find("mass").set("value", repr(mass))
-        inertial.find("origin").set("xyz", " ".join(repr(v) for v in com))
+        _find(inertial, "mass").set("value", repr(mass))
+        _find(inertial, "origin").set("xyz", " ".join(repr(v) for v in com))

@@ -157,7 +157,8 @@ class View:
         """(body, link, shape index, colour) of every visual shape, fixed parts first."""
         view = self.world
         if self._shapes is None:
-            shapes, seen = [], collections.Counter()
+            shapes = []
+            seen: collections.Counter[tuple[int, int]] = collections.Counter()
             for body in (view.body, view.ball):
                 for shape in view.client.getVisualShapeData(body):
                     link = shape[1]

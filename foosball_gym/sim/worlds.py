@@ -19,6 +19,7 @@ import functools
 import math
 import os
 import sys
+import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from functools import cache
 from typing import TYPE_CHECKING
@@ -380,6 +381,32 @@ class World:
         self.reset_pose(self.ball, position, orientation)
         self.reset_velocity(self.ball, velocity, spin)
 
+    def save(self) -> bytes:
+        """Everything Bullet holds of this world (the bodies' state and the contacts it carries
+        from step to step) as the bytes of a ``.bullet`` file, for :meth:`load`."""
+        with tempfile.TemporaryDirectory() as folder:
+            path = os.path.join(folder, "world.bullet")
+            self.client.saveBullet(path)
+            with open(path, "rb") as file:
+                return file.read()
+
+    def load(self, saved: bytes, dt: float, substeps: int) -> None:
+        """Put this world in the state :meth:`save` took from a world of the same rods, whose
+        step was ``dt`` in ``substeps``. Bullet saves no motors: the next step tells them."""
+        with tempfile.TemporaryDirectory() as folder:
+            path = os.path.join(folder, "world.bullet")
+            with open(path, "wb") as file:
+                file.write(saved)
+            try:
+                self.client.restoreState(fileName=path)
+            except pybullet.error as err:
+                msg = f"a saved Bullet world does not fit this one (rods {self.names})"
+                raise ValueError(msg + ": saved from other rods or by another Bullet") from err
+        # Loading brings the saved world's solver settings; the step is set to match them.
+        self.dt = math.nan
+        self.set_step(dt, substeps)
+        self.sent = None
+
     def close(self) -> None:
         with contextlib.suppress(Exception):
             self.client.disconnect()
@@ -498,6 +525,22 @@ class TableWorlds:
         else:
             # Bullet's joint motors must let go before raw torques can move the joints.
             world.let_go(links)
+
+    def save(self) -> tuple:
+        """What :meth:`load` needs to carry on as these worlds would: the rods (indices) of the
+        world holding the ball (none: the world without rods), those standing in it, the world
+        saved whole and its step ``(dt, substeps)``. Entering any other world clears it."""
+        world = self.current
+        window = tuple(i for i, rod in enumerate(self.rods) if rod.name in world.links)
+        return window, self.simulated, world.save(), (world.dt, world.substeps)
+
+    def load(self, saved: tuple, ball: tuple, materials: dict[str, float]) -> None:
+        """Carry on from what :meth:`save` gave on a table of the same rods, the drives already
+        in their saved state; ``ball`` is the ball's state then."""
+        window, simulated, bullet, step = saved
+        world = self._world_of(window) if window else self.own
+        self.enter(world, simulated, ball, materials)
+        world.load(bullet, *step)
 
     def close(self) -> None:
         for world in (self.own, *self._worlds.values()):

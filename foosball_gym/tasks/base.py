@@ -8,6 +8,7 @@ on the game; the real table needs only the task's :class:`~foosball_gym.policy_i
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -115,7 +116,7 @@ class Task:
         length (None: until the time limit)."""
         return None
 
-    def scripted_policy(self, names: list[str], precise_state: bool = True) -> Policy:
+    def scripted_policy(self, names: Sequence[str], precise_state: bool = True) -> Policy:
         """The scripted baseline for the learner's side, on observations with ``names``.
 
         ``precise_state``: the observation is the simulator's own state, not an estimate from a
@@ -126,7 +127,7 @@ class Task:
         return ScriptedTeam(names, self.layout.controlled, self.layout.joints)
 
     def scripted_level(
-        self, level: int | None, names: list[str], precise_state: bool = True
+        self, level: int | None, names: Sequence[str], precise_state: bool = True
     ) -> Policy:
         """The scripted team of rung ``level`` of the task's ladder for the learner's side
         (None: its scripted baseline, the top), on observations with ``names``.

@@ -3,6 +3,7 @@ or without still obstacles in the way."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, Literal
 
 import numpy as np
@@ -83,7 +84,7 @@ class ScoreTask(Task):
             )
         return values
 
-    def scripted_policy(self, names: list[str], precise_state: bool = True) -> ScriptedTeam:
+    def scripted_policy(self, names: Sequence[str], precise_state: bool = True) -> ScriptedTeam:
         """The scripted keeper, deflecting incoming balls to the goal (or striking them where
         it cannot: blocked ones trickle out of reach) and aiming past the obstacles.
 

@@ -11,7 +11,7 @@ import json
 import math
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 
@@ -19,6 +19,9 @@ from foosball_gym.registration import check_env_id
 from foosball_gym.training.run_dir.files import atomic_write_text
 from foosball_gym.training.run_dir.physics import physics_record
 from foosball_gym.training.selfplay.rule import check_rule, default_threshold
+
+if TYPE_CHECKING:
+    from foosball_gym.envs.base import FoosballEnv
 
 ALGORITHMS = ("ppo", "sac")
 VEC_ENV_KINDS = ("dummy", "subproc")
@@ -215,7 +218,7 @@ class TrainConfig:
                 f"got {self.video_every!r}"
             )
         env = gym.make(self.env_id, **self.env_kwargs)  # raises on a bad env option
-        two_player = bool(env.unwrapped.layout.opponent)
+        two_player = bool(cast("FoosballEnv", env.unwrapped).layout.opponent)
         env.close()
         if self.self_play and not two_player:
             raise ValueError(f"{self.env_id} has no opponent; self-play needs a two-player task")

@@ -1,4 +1,7 @@
-"""Training hyperparameters kept in a YAML file, as RL Zoo keeps them: ``foosball train --config``.
+"""Training hyperparameters kept in a YAML file, one run to a file: ``foosball train --config``.
+
+The format is the package's own; RL Zoo's files for the same tasks are in
+:mod:`foosball_gym.rl_zoo`.
 
 A file maps :class:`~foosball_gym.training.config.TrainConfig` field names to values
 (``n_envs: 8``, ``net_arch: [256, 128, 64]``), ``env_kwargs`` to a mapping of environment

@@ -73,13 +73,15 @@ class FrameBuffer:
         """Whether a frame stamped ``stamp`` would be news to the loop."""
         return self.given is None or stamp > self.given
 
-    def newest(self, after: Stamp, upto: Stamp) -> Frame | None:
+    def newest(self, after: Stamp, upto: tuple[float, float]) -> Frame | None:
         for frame in reversed(self.frames):
             if after <= frame[0] <= upto:
                 return frame
         return None
 
-    def give(self, after: Stamp, upto: Stamp) -> tuple[Stamp, np.ndarray | None] | None:
+    def give(
+        self, after: Stamp, upto: tuple[float, float]
+    ) -> tuple[Stamp, np.ndarray | None] | None:
         """The newest usable frame not given yet; ``(last stamp given, None)`` when there is
         none but one was given since ``after``; None when none was."""
         frame = self.newest(after, upto)
@@ -141,7 +143,7 @@ class CameraProcess:
     def latest(
         self,
         after: Stamp = (0, -math.inf),
-        upto: Stamp = (math.inf, math.inf),
+        upto: tuple[float, float] = (math.inf, math.inf),  # no bound
         timeout: float = 1.0,
         patience: float | None = None,
     ) -> tuple[Stamp, np.ndarray | None]:

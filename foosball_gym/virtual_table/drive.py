@@ -116,6 +116,18 @@ class DriveEvent:
     speed: float
 
 
+def _default(od: canopen.ObjectDictionary, index: int) -> int:
+    """The default value of the variable at ``index``.
+
+    Raises:
+        ValueError: the object dictionary gives it none.
+    """
+    variable = od.get_variable(index)
+    if variable is None or variable.default is None:
+        raise ValueError(f"the object dictionary has no default for 0x{index:04X}")
+    return variable.default
+
+
 class SimulatedDrive:
     """One simulated drive: a LocalNode and its CiA 402 state.
 
@@ -173,7 +185,7 @@ class SimulatedDrive:
         self._after_ramp: str | None = None  # the state a ramp ends in; None: hold
         od = self.node.object_dictionary
         self._options = {
-            index: od[index].default
+            index: _default(od, index)
             for index in (
                 QUICK_STOP_OPTION_CODE,
                 SHUTDOWN_OPTION_CODE,
@@ -190,6 +202,7 @@ class SimulatedDrive:
         self.events: collections.deque[DriveEvent] = collections.deque(maxlen=EVENTS_KEPT)
         self.node.add_write_callback(self._on_write)
         self.node.add_read_callback(self._on_read)
+        assert self.node.rpdo.map is not None  # an RPDO object makes its maps
         for pdo in self.node.rpdo.map.values():
             pdo.add_callback(self._on_rpdo)
 
@@ -244,6 +257,8 @@ class SimulatedDrive:
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
         value = od.decode_raw(data)
+        if not isinstance(value, int):
+            return  # every object handled below is an integer
         with self._lock:
             if index == CONTROLWORD:
                 statusword, speed = self.statusword, self.moving_speed
@@ -458,6 +473,7 @@ class SimulatedDrive:
     def send_tpdos(self) -> None:
         if self.node.nmt.state != "OPERATIONAL":
             return
+        assert self.node.tpdo.map is not None  # a TPDO object makes its maps
         for pdo in self.node.tpdo.map.values():
             if pdo.enabled:
                 for var in pdo:

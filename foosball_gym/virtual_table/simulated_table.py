@@ -133,7 +133,8 @@ class SimulatedTable:
         # As the environment checks it.
         if not isinstance(stagnation, (int, np.integer)) or stagnation < 0:
             raise ValueError(f"stagnation_steps must be a non-negative integer, got {stagnation!r}")
-        self.sim = TableSim(task.layout.rods, **dict(zip(PHYSICS_DEFAULTS, physics)))
+        physics_options: dict[str, Any] = dict(zip(PHYSICS_DEFAULTS, physics))
+        self.sim = TableSim(task.layout.rods, **physics_options)
         self.realtime = bool(realtime)
         self.pace = bool(pace) and not self.realtime
         self._paced_from: float | None = None
@@ -152,7 +153,7 @@ class SimulatedTable:
         self._thread: threading.Thread | None = None
         try:
             self.game = Game(
-                task, interface_of(task, options), self.sim, stagnation_steps=stagnation
+                task, interface_of(task, options), self.sim, stagnation_steps=int(stagnation)
             )
             self.rng = np.random.default_rng(seed)
             self.game.start(task.sample_start(self.rng))

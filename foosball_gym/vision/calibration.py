@@ -59,6 +59,7 @@ def calibrate_intrinsics(
             f"the chessboard ({pattern[0]}x{pattern[1]} inner corners) was found "
             f"in {len(object_points)} of {len(images)} images; at least 3 needed"
         )
+    assert size is not None  # every image sets it, and three or more were read
     rms, K, dist, _, _ = cv2.calibrateCamera(object_points, image_points, size, None, None)
     return K, dist.reshape(-1), float(rms)
 

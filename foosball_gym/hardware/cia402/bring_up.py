@@ -70,6 +70,7 @@ def stop_settings(
             (CONSUMER_HEARTBEAT_TIME, 1, (master_node_id << 16) | timeout_ms),
             (ABORT_CONNECTION_OPTION_CODE, None, ABORT_CONNECTION_QUICK_STOP),
         ]
+    assert joint.max_acceleration is not None  # JointConfig fills in its default
     acceleration = abs(joint.speed_to_increments(joint.max_acceleration))
     return [
         *writes,
@@ -92,6 +93,8 @@ def mode_settings(joint: JointConfig, mode: str, control_hz: float) -> list[Writ
             (INTERPOLATION_TIME_PERIOD, 1, round(1e4 / control_hz)),
             (INTERPOLATION_TIME_PERIOD, 2, -4),
         ]
+    # JointConfig fills in the defaults of those left None.
+    assert joint.max_speed is not None and joint.max_acceleration is not None
     return [
         (PROFILE_VELOCITY, None, abs(joint.speed_to_increments(joint.max_speed))),
         (PROFILE_ACCELERATION, None, abs(joint.speed_to_increments(joint.max_acceleration))),
@@ -107,6 +110,7 @@ def lay_out_csp_pdos(node: canopen.RemoteNode) -> None:
     state on every SYNC.
     """
     for pdos in (node.rpdo, node.tpdo):
+        assert pdos.map is not None  # RPDO and TPDO objects make their maps
         for pdo in pdos.map.values():
             pdo.clear()
             pdo.cob_id = pdo.predefined_cob_id

@@ -235,7 +235,9 @@ class Cia402Drive(DriveLink):
                 timeout=2 * self.heartbeat_timeout_s,
             )
             if not confirmed:
-                state = NMT_STATES.get(self._heartbeat_state, "no heartbeat at all")
+                state = "no heartbeat at all"
+                if self._heartbeat_state is not None:
+                    state = NMT_STATES.get(self._heartbeat_state, state)
                 raise DriveFault(
                     self.joint,
                     f"no heartbeat reporting OPERATIONAL within "
@@ -275,6 +277,7 @@ class Cia402Drive(DriveLink):
                 return
             if self._pdo:
                 with self._talking("sending RPDO1"):
+                    assert self._target is not None  # csp maps the PDOs in bring-up
                     self._target.raw = increments
                     self._rpdo.transmit()
                 return
@@ -321,6 +324,8 @@ class Cia402Drive(DriveLink):
                         f"({1e3 / self.control_hz:.1f} ms)",
                     )
                 self._sync_mark = None
+                # The drive's TPDOs answered, so both are set.
+                assert self._position is not None and self._velocity is not None
                 return (
                     joint.from_increments(self._position),
                     joint.speed_from_increments(self._velocity),
@@ -341,7 +346,10 @@ class Cia402Drive(DriveLink):
     @property
     def stop_time_s(self) -> float:
         """How long a quick stop from the joint's top speed takes on the configured ramp."""
-        return self.joint.max_speed / self.joint.max_acceleration
+        joint = self.joint
+        # JointConfig fills in the defaults of those left None.
+        assert joint.max_speed is not None and joint.max_acceleration is not None
+        return joint.max_speed / joint.max_acceleration
 
     def wait_until_stopped(self) -> bool:
         """Wait until a quick-stopped drive reports standstill.
@@ -356,6 +364,7 @@ class Cia402Drive(DriveLink):
             True if the drive reported standstill, False if the bound passed first.
         """
         joint = self.joint
+        assert joint.max_speed is not None  # JointConfig fills in its default
         slow = STANDSTILL_FRACTION * abs(joint.speed_to_increments(joint.max_speed))
         deadline = time.monotonic() + STOP_TIME_FACTOR * self.stop_time_s + STOP_SLACK_S
         while True:
@@ -432,6 +441,8 @@ class Cia402Drive(DriveLink):
                 )
             if self._expect_nmt is None:
                 return None
+            # A heartbeat confirmed the state expected.
+            assert self._heartbeat_state is not None and self._heartbeat_at is not None
             if self._heartbeat_state == NMT_BOOT_UP:
                 return "rebooted (boot-up message on the heartbeat)"
             if self._heartbeat_state != self._expect_nmt:

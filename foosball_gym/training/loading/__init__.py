@@ -1,5 +1,6 @@
 """Loading trained policies to play or to rate: :func:`load_policy` reads a run directory of
-either backend, a model zip or ``builtin:NAME``.
+either backend, a model zip of any SB3 or sb3-contrib algorithm that acts on continuous
+actions, an RL Zoo run, or ``builtin:NAME``.
 
 Needs PyTorch and Stable-Baselines3 (the ``train`` extra), and never imports a trainer or Ray.
 """
@@ -11,12 +12,13 @@ from foosball_gym.training.loading.loader import (
     builtin_path,
     load_policy,
 )
-from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning
+from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning, UnknownPhysicsWarning
 
 __all__ = [
     "LoadedPolicy",
     "ModelLoadError",
     "PhysicsMismatchWarning",
+    "UnknownPhysicsWarning",
     "builtin_names",
     "builtin_path",
     "load_policy",

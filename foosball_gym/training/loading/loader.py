@@ -8,7 +8,6 @@ algorithm.
 from __future__ import annotations
 
 import json
-import warnings
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -17,7 +16,18 @@ from typing import Any
 import numpy as np
 
 from foosball_gym.policy_io.task import residual_action
-from foosball_gym.training.loading.rllib_policy import is_rllib_run, load_rllib_policy
+from foosball_gym.training.loading.recurrent import RecurrentSnapshot
+from foosball_gym.training.loading.rl_zoo import find_zoo_run, is_zoo_run
+from foosball_gym.training.loading.rllib_policy import (
+    RllibPolicy,
+    is_rllib_run,
+    load_rllib_policy,
+)
+from foosball_gym.training.loading.sb3_policies import (
+    is_recurrent,
+    policy_class_name,
+    policy_from_zip,
+)
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot, policy_from_state_dict
 from foosball_gym.training.run_dir.files import (
     CONFIG_FILE,
@@ -25,8 +35,14 @@ from foosball_gym.training.run_dir.files import (
     MODEL_FILE,
     NORM_FILE,
 )
-from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning, physics_mismatch
-from foosball_gym.training.run_dir.storage import UntrustedFileError, read_model_zip, read_norm
+from foosball_gym.training.run_dir.physics import warn_physics
+from foosball_gym.training.run_dir.storage import (
+    NormStats,
+    UntrustedFileError,
+    load_pickled_norm,
+    read_model_zip,
+    read_norm,
+)
 
 
 class ModelLoadError(ValueError):
@@ -45,7 +61,7 @@ class LoadedPolicy:
     an environment made with them takes the whole action.
     """
 
-    policy: PolicySnapshot
+    policy: PolicySnapshot | RllibPolicy
     env_id: str | None
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     source: str = ""
@@ -56,6 +72,17 @@ class LoadedPolicy:
     def observation_size(self) -> int:
         """The size of the observations it takes."""
         return self.policy.observation_size
+
+    @property
+    def recurrent(self) -> bool:
+        """Whether it carries a state from call to call (RecurrentPPO): :meth:`reset` it where
+        each episode starts."""
+        return isinstance(self.policy, RecurrentSnapshot)
+
+    def reset(self) -> None:
+        """Start a new episode: a recurrent policy forgets its state; others have none."""
+        if isinstance(self.policy, RecurrentSnapshot):
+            self.policy.reset()
 
     def __call__(self, obs: Any) -> np.ndarray:
         action = self.policy(obs)
@@ -70,7 +97,9 @@ class LoadedPolicy:
         import gymnasium as gym
 
         env = gym.make(env_id, **(env_kwargs or {}))
-        size = int(np.prod(env.observation_space.shape))
+        shape = env.observation_space.shape
+        assert shape is not None  # the environments observe a Box
+        size = int(np.prod(shape))
         env.close()
         expected = self.policy.observation_size
         if size != expected:
@@ -108,24 +137,35 @@ def builtin_path(name: str) -> Path:
 
 
 def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
-    """Load a policy from a run directory, a model ``.zip``, or ``builtin:NAME``.
+    """Load a policy from a run directory, a model ``.zip``, an RL Zoo run, or ``builtin:NAME``.
 
     The environment id and options come from the run's ``config.json`` (next to the zip, or
-    one level up for a checkpoint); a bare zip without one loads with ``env_id=None``.
+    one level up for a checkpoint); a bare zip without one loads with ``env_id=None``. An RL
+    Zoo run folder (``<log>/<algo>/<env>_<n>/``, or a zip in one) gives its final model with
+    the environment and options it trained on (see :func:`.rl_zoo.find_zoo_run`).
+
+    The model zip may be of any Stable-Baselines3 or sb3-contrib algorithm that acts on
+    continuous actions, with its ``MlpPolicy`` (:data:`.sb3_policies.SUPPORTED`); others are
+    refused in one line saying which load. A RecurrentPPO policy carries its LSTM state from
+    call to call: ``reset()`` it where an episode starts (``evaluate`` does).
 
     Nothing is unpickled unless ``trust`` is given: the weights are read as tensors and the
     policy rebuilt around them, the pickled fields SB3 keeps in the zip are left unread, and
     normalisation statistics are read from ``vecnormalize.json``. A run from before that file
-    (``vecnormalize.pkl``) is refused with a message saying how to migrate it.
+    (``vecnormalize.pkl``) is refused with a message saying how to migrate it; an RL Zoo run's
+    ``vecnormalize.pkl``, with one saying to trust it.
 
-    Warns with :class:`PhysicsMismatchWarning` where the model was trained on another physics
-    revision than the current one; a model without a record (a run from before runs recorded
-    it, or a bare zip) counts as revision 1.
+    Warns with :class:`~foosball_gym.training.run_dir.physics.PhysicsMismatchWarning` where
+    the model was trained on another physics revision than the current one (a run from before
+    runs recorded it was trained on revision 1). A model with no run's ``config.json`` at all
+    (a bare zip, an RL Zoo run) warns with
+    :class:`~foosball_gym.training.run_dir.physics.UnknownPhysicsWarning`: its revision is
+    unknown.
 
     Args:
-        spec: the run directory, the model zip, or ``builtin:NAME``.
-        trust: also read pickled files (a legacy ``vecnormalize.pkl``): only for files whose
-            source you trust, since unpickling runs whatever code the file holds.
+        spec: the run directory, the model zip, the RL Zoo run folder, or ``builtin:NAME``.
+        trust: also read pickled files (a legacy or RL Zoo ``vecnormalize.pkl``): only for
+            files whose source you trust, since unpickling runs whatever code the file holds.
 
     Raises:
         ModelLoadError: no model there, or it cannot be read (or only by unpickling, untrusted).
@@ -135,51 +175,52 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
         path = builtin_path(text.split(":", 1)[1])
     else:
         path = Path(text)
-    if path.is_dir():
-        if is_rllib_run(path):
-            try:
-                rllib = load_rllib_policy(path)
-            except ValueError as err:
-                raise ModelLoadError(str(err)) from None
-            return LoadedPolicy(
-                policy=rllib, env_id=rllib.env_id, env_kwargs=rllib.env_kwargs, source=str(path)
-            )
-        run_dir, zip_path = path, path / MODEL_FILE
-        if not zip_path.exists():
-            raise ModelLoadError(f"{path} is a directory without {MODEL_FILE}: not a run")
+    if path.is_dir() and is_rllib_run(path):
+        try:
+            rllib = load_rllib_policy(path)
+        except ValueError as err:
+            raise ModelLoadError(str(err)) from None
+        return LoadedPolicy(
+            policy=rllib, env_id=rllib.env_id, env_kwargs=rllib.env_kwargs, source=str(path)
+        )
+    env_id: str | None
+    zoo = is_zoo_run(path)
+    if zoo:
+        try:
+            found = find_zoo_run(path)
+        except ValueError as err:
+            raise ModelLoadError(str(err)) from None
+        zip_path, norm, run_dir, config = found.model, found.norm, found.folder, None
+        env_id, env_kwargs = found.env_id, found.env_kwargs
     else:
-        zip_path = path
-        run_dir = path.parent
-    if not zip_path.exists():
-        raise ModelLoadError(f"no model at {zip_path}")
-    config = _find_config(run_dir)
-    try:
-        _, params, _ = read_model_zip(zip_path)
-        policy = policy_from_state_dict(params["policy"])
-    except (KeyError, ValueError, RuntimeError, EOFError) as err:
-        reason = "it has no policy weights" if isinstance(err, KeyError) else str(err)
-        raise ModelLoadError(
-            f"cannot read {zip_path} as a Stable-Baselines3 model ({reason})"
-        ) from None
-    env_id = (config or {}).get("env_id")
-    norm = _find_norm(zip_path, run_dir)
+        if path.is_dir():
+            run_dir, zip_path = path, path / MODEL_FILE
+            if not zip_path.exists():
+                raise ModelLoadError(
+                    f"{path} is a directory without {MODEL_FILE}: not a run of foosball_gym, "
+                    "nor an RL Zoo run (<env>/args.yml), nor an exported RLlib policy"
+                )
+        else:
+            zip_path, run_dir = path, path.parent
+        if not zip_path.exists():
+            raise ModelLoadError(f"no model at {zip_path}")
+        config = _find_config(run_dir)
+        env_id = (config or {}).get("env_id")
+        env_kwargs = dict((config or {}).get("env_kwargs", {}))
+        norm = _find_norm(zip_path, run_dir)
+    policy, recurrent = _read_policy(zip_path)
+    stats = None
     if norm is not None:
         run = text if text.startswith("builtin:") else run_dir
-        try:
-            stats = read_norm(norm, run, trust)
-        except UntrustedFileError as err:
-            raise ModelLoadError(str(err)) from None
-        except Exception as err:  # noqa: BLE001 - any unreadable file gets the same message
-            raise ModelLoadError(f"cannot read normalisation statistics {norm}: {err}") from err
-        snapshot = PolicySnapshot(
+        stats = _read_stats(norm, run, trust, zoo)
+    cls = RecurrentSnapshot if recurrent else PolicySnapshot
+    if stats is not None and stats.norm_obs:
+        snapshot = cls(
             policy, stats.obs_mean, stats.obs_var, stats.clip_obs, stats.epsilon, env_id=env_id
         )
     else:
-        snapshot = PolicySnapshot(policy, env_id=env_id)
-    mismatch = physics_mismatch(config, f"the model {text}")
-    if mismatch:
-        warnings.warn(mismatch, PhysicsMismatchWarning, stacklevel=2)
-    env_kwargs = dict((config or {}).get("env_kwargs", {}))
+        snapshot = cls(policy, env_id=env_id)
+    warn_physics(config, f"the model {text}")
     residual = float(env_kwargs.pop("residual", 0.0) or 0.0)
     baseline = None
     if residual and env_id is not None:
@@ -194,6 +235,41 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
         trained_residual=residual,
         baseline=baseline,
     )
+
+
+def _read_policy(zip_path: Path) -> tuple[Any, bool]:
+    """The policy in a Stable-Baselines3 zip, and whether it is recurrent."""
+    try:
+        data, params, _ = read_model_zip(zip_path)
+        state = params["policy"]
+        if policy_class_name(data) is None:
+            # Zips that do not name their policy: a PPO or SAC MlpPolicy, told by its weights.
+            return policy_from_state_dict(state), False
+        return policy_from_zip(data, state), is_recurrent(data)
+    except (KeyError, ValueError, RuntimeError, EOFError) as err:
+        reason = "it has no policy weights" if isinstance(err, KeyError) else str(err)
+        raise ModelLoadError(
+            f"cannot read {zip_path} as a Stable-Baselines3 model ({reason})"
+        ) from None
+
+
+def _read_stats(norm: Path, run: Path | str, trust: bool, zoo: bool) -> NormStats:
+    """The normalisation statistics in ``norm``: plain numbers, or a pickle only if trusted."""
+    try:
+        if zoo and norm.suffix == ".pkl":
+            if not trust:
+                raise UntrustedFileError(
+                    f"{norm} holds the RL Zoo run's observation normalisation as a pickle, "
+                    "which can run any code when it is read, so it was not read: give "
+                    "--trust-model (load_policy's trust=True) if you trust where the run "
+                    "comes from"
+                )
+            return load_pickled_norm(norm)
+        return read_norm(norm, run, trust)
+    except UntrustedFileError as err:
+        raise ModelLoadError(str(err)) from None
+    except Exception as err:  # noqa: BLE001 - any unreadable file gets the same message
+        raise ModelLoadError(f"cannot read normalisation statistics {norm}: {err}") from err
 
 
 def _find_config(run_dir: Path) -> dict[str, Any] | None:

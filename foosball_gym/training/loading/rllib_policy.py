@@ -10,20 +10,19 @@ outputs, clipped to [-1, 1].
 from __future__ import annotations
 
 import json
-import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from foosball_gym.training.run_dir.files import CONFIG_FILE, POLICY_FILE, POLICY_INFO_FILE
-from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning, physics_mismatch
+from foosball_gym.training.run_dir.physics import warn_physics
 from foosball_gym.training.run_dir.tensors import load_tensors
 
 POLICY_FORMAT = 1
 
-_ACTIVATIONS = {
+_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "tanh": np.tanh,
     "relu": lambda x: np.maximum(x, 0.0),
     "linear": lambda x: x,
@@ -74,6 +73,8 @@ class RllibPolicy:
             raise ValueError(
                 f"unknown activation {activation!r}; allowed: {', '.join(_ACTIVATIONS)}"
             )
+        if (obs_mean is None) != (obs_std is None):
+            raise ValueError("obs_mean and obs_std are given together or not at all")
         self.weights = weights
         self.activation = activation
         self._act = _ACTIVATIONS[activation]
@@ -98,6 +99,7 @@ class RllibPolicy:
         if single:
             x = x[None]
         if self.obs_mean is not None:
+            assert self.obs_std is not None  # __init__ takes both or neither
             # RLlib's MeanStdFilter: (x - mean) / (std + 1e-8), then clipped.
             x = (x - self.obs_mean) / (self.obs_std + 1e-8)
             if self.clip_obs:
@@ -124,7 +126,9 @@ def load_rllib_policy(run_dir: str | Path) -> RllibPolicy:
     Reads ``policy.json`` and ``policy.pt`` with ``torch.load(weights_only=True)``: nothing is
     unpickled, so no trust is needed. Warns with
     :class:`~foosball_gym.training.run_dir.physics.PhysicsMismatchWarning` where the run's
-    ``config.json`` (beside it, or up to two levels up) records other physics than the current one.
+    ``config.json`` (beside it, or up to two levels up) records other physics than the current
+    one, and with :class:`~foosball_gym.training.run_dir.physics.UnknownPhysicsWarning` where
+    neither it nor ``policy.json`` records any.
 
     Raises:
         ValueError: no exported policy there, or its files do not agree with each other.
@@ -177,9 +181,7 @@ def load_rllib_policy(run_dir: str | Path) -> RllibPolicy:
             break
     if config is None and "physics" in info:
         config = {"physics": info["physics"]}
-    mismatch = physics_mismatch(config, f"the model {run_dir}")
-    if mismatch:
-        warnings.warn(mismatch, PhysicsMismatchWarning, stacklevel=2)
+    warn_physics(config, f"the model {run_dir}")
     return RllibPolicy(
         weights,
         info["activation"],

@@ -8,6 +8,7 @@ one never unpickles an object.
 from __future__ import annotations
 
 import copy
+import inspect
 import pickle
 import re
 from collections.abc import Mapping
@@ -15,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import torch as th
 from gymnasium import spaces
 
@@ -55,7 +57,8 @@ def policy_from_state_dict(state: Mapping[str, Any]) -> Any:
         obs_size = (pi[0] if pi else state["action_net.weight"]).shape[1]
         act_size = state["action_net.weight"].shape[0]
         net_arch = {"pi": [w.shape[0] for w in pi], "vf": [w.shape[0] for w in vf]}
-        cls, extra = ActorCriticPolicy, {}
+        cls: type[ActorCriticPolicy | SACPolicy] = ActorCriticPolicy
+        extra: dict[str, Any] = {}
     elif "actor.mu.weight" in state:
         from stable_baselines3.sac.policies import SACPolicy
 
@@ -82,6 +85,25 @@ def policy_from_state_dict(state: Mapping[str, Any]) -> Any:
     return policy
 
 
+def _constructor_parameters(policy: Any) -> dict[str, Any]:
+    """What rebuilds ``policy``: its constructor's arguments as it reports them, with what
+    sb3-contrib's policies leave out (a RecurrentActorCriticPolicy its LSTM's) and less what
+    the constructor does not take (ARSLinearPolicy reports its parent's ``net_arch``)."""
+    parameters = policy._get_constructor_parameters()
+    if getattr(policy, "lstm_actor", None) is not None:
+        parameters.update(
+            lstm_hidden_size=policy.lstm_actor.hidden_size,
+            n_lstm_layers=policy.lstm_actor.num_layers,
+            shared_lstm=policy.shared_lstm,
+            enable_critic_lstm=policy.enable_critic_lstm,
+            lstm_kwargs=policy.lstm_kwargs,
+        )
+    accepted = inspect.signature(type(policy).__init__).parameters
+    if any(p.kind is p.VAR_KEYWORD for p in accepted.values()):
+        return parameters
+    return {k: v for k, v in parameters.items() if k in accepted}
+
+
 class PolicySnapshot:
     """A frozen policy: raw observations in, actions in [-1, 1] out.
 
@@ -104,17 +126,19 @@ class PolicySnapshot:
     def __init__(
         self,
         policy: Any,
-        obs_mean: np.ndarray | None = None,
-        obs_var: np.ndarray | None = None,
+        obs_mean: npt.ArrayLike | None = None,
+        obs_var: npt.ArrayLike | None = None,
         clip_obs: float = 10.0,
         epsilon: float = 1e-8,
         generation: int = 0,
         env_id: str | None = None,
         deterministic: bool = True,
     ) -> None:
+        if (obs_mean is None) != (obs_var is None):
+            raise ValueError("obs_mean and obs_var are given together or not at all")
         # Rebuilt from its constructor arguments and weights (as SB3 saves policies): a deep
         # copy would trip over the tensors a policy keeps from its last forward pass.
-        self.policy = type(policy)(**policy._get_constructor_parameters())
+        self.policy = type(policy)(**_constructor_parameters(policy))
         self.policy.load_state_dict(copy.deepcopy(policy.state_dict()))
         self.policy.to("cpu")
         self.policy.set_training_mode(False)
@@ -144,6 +168,7 @@ class PolicySnapshot:
         while env is not None and not isinstance(env, VecNormalize):
             env = getattr(env, "venv", None)
         if isinstance(env, VecNormalize) and env.norm_obs:
+            assert not isinstance(env.obs_rms, dict)  # the environments observe a Box
             return cls(
                 model.policy,
                 env.obs_rms.mean,
@@ -158,6 +183,7 @@ class PolicySnapshot:
     def normalise(self, obs: np.ndarray) -> np.ndarray:
         if self.obs_mean is None:
             return obs.astype(np.float32)
+        assert self.obs_var is not None  # __init__ takes both or neither
         z = (obs - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon)
         return np.clip(z, -self.clip_obs, self.clip_obs).astype(np.float32)
 
@@ -166,9 +192,13 @@ class PolicySnapshot:
         single = obs.ndim == 1
         batch = self.normalise(obs[None] if single else obs)
         with th.no_grad():
-            actions, _ = self.policy.predict(batch, deterministic=self.deterministic)
+            actions = self._predict(batch)
         actions = np.clip(actions, -1.0, 1.0).astype(np.float32)
         return actions[0] if single else actions
+
+    def _predict(self, batch: np.ndarray) -> np.ndarray:
+        actions, _ = self.policy.predict(batch, deterministic=self.deterministic)
+        return actions
 
     def parameters_equal(self, policy: Any) -> bool:
         """True when ``policy`` has exactly this snapshot's weights."""

@@ -22,6 +22,7 @@ class OpponentPool:
     and the rule that says when it has beaten them."""
 
     def __init__(self, config: TrainConfig, save_dir: Path) -> None:
+        assert config.selfplay_threshold is not None  # config.check() sets the rule's default
         self.rule = ReplacementRule(
             config.selfplay_rule, config.selfplay_threshold, config.selfplay_window
         )

@@ -165,6 +165,7 @@ def train_rllib(
         opponents = selfplay.module_ids if continuing else (opponent_id(0),)
         algo = build_config(config, num_workers, opponents, lr_start, remaining).build_algo()
         if continuing:
+            assert pointer is not None  # read above when continuing
             step_dir = out / CHECKPOINT_DIR / pointer["checkpoint"]
             _set_modules(algo, {LEARNER: load_tensors(step_dir / "learner.pt"), **restored})
             optimizer = step_dir / "optimizer.pt"

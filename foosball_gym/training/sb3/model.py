@@ -24,9 +24,9 @@ ALGOS = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
 
 
 def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
-    policy_kwargs = {"net_arch": list(config.net_arch)}
+    policy_kwargs: dict[str, Any] = {"net_arch": list(config.net_arch)}
     lr = config.learning_rate
-    common = {
+    common: dict[str, Any] = {
         # SB3 calls a schedule with the progress remaining, from 1 down to 0.
         "learning_rate": (lambda remaining: lr * remaining)
         if config.lr_schedule == "linear"

@@ -13,7 +13,7 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -22,6 +22,9 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from foosball_gym.training.config import TrainConfig
 from foosball_gym.training.run_dir.files import PRETRAIN_FILE, atomic_write_text
+
+if TYPE_CHECKING:
+    from foosball_gym.envs.base import FoosballEnv
 
 
 @dataclass
@@ -42,9 +45,10 @@ def collect(
 ) -> Demonstrations:
     """Play ``episodes`` episodes with the task's scripted policy and record them."""
     env = gym.make(env_id, **env_kwargs)
-    policy = env.unwrapped.scripted_policy()
+    policy = cast("FoosballEnv", env.unwrapped).scripted_policy()
     rng = np.random.default_rng(seed)
-    obs_all, act_all, ret_all = [], [], []
+    obs_all, act_all = [], []
+    ret_all: list[float] = []
     successes = 0
     try:
         for i in range(episodes):
@@ -56,7 +60,7 @@ def collect(
                 act_all.append(action)
                 executed = np.clip(action + rng.normal(0.0, noise, action.shape), -1, 1)
                 obs, reward, terminated, truncated, info = env.step(executed.astype(np.float32))
-                rewards.append(reward)
+                rewards.append(float(reward))
                 done = terminated or truncated
             successes += bool(info["is_success"])
             g, episode_returns = 0.0, []
@@ -94,7 +98,8 @@ def clone(
     obs = demos.observations
     if isinstance(norm, VecNormalize) and norm.norm_obs:
         norm.obs_rms.update(obs)
-        obs = norm.normalize_obs(obs)
+        # A Box's observations normalise to an array (SB3 also types the dict case).
+        obs = cast(np.ndarray, norm.normalize_obs(obs))
     policy = model.policy
     device = policy.device
     obs_t = th.as_tensor(obs, dtype=th.float32, device=device)

@@ -15,15 +15,20 @@ labels a policy can fit: its own mean is such a policy.
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 import numpy as np
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.vec_env import VecNormalize
 
 from foosball_gym.training.loading import load_policy
+
+if TYPE_CHECKING:
+    from foosball_gym.envs.base import FoosballEnv
 
 
 class TeacherCallback(BaseCallback):
@@ -54,9 +59,10 @@ class TeacherCallback(BaseCallback):
         if steps < 1:
             raise ValueError(f"the teacher's steps must be at least 1, got {steps}")
         env = gym.make(env_id, **env_kwargs)
+        self.teacher: Callable[[np.ndarray], Any]
         try:
             if teacher == "scripted":
-                self.teacher = env.unwrapped.scripted_policy()
+                self.teacher = cast("FoosballEnv", env.unwrapped).scripted_policy()
             else:
                 self.teacher = _model_teacher(teacher, env_id, env.observation_space.shape)
             # A model labels a whole rollout in one pass; the scripted policy one state a time.
@@ -81,11 +87,13 @@ class TeacherCallback(BaseCallback):
         weight = self.weight(self.num_timesteps)
         if weight <= 0.0:
             return
+        assert isinstance(self.model, OnPolicyAlgorithm)  # the configuration allows PPO only
         policy = self.model.policy
         obs = self.model.rollout_buffer.observations
         obs = obs.reshape(-1, obs.shape[-1])
         norm = self.model.get_vec_normalize_env()
         raw = norm.unnormalize_obs(obs) if isinstance(norm, VecNormalize) and norm.norm_obs else obs
+        assert isinstance(raw, np.ndarray)  # the environments observe a Box
         if self._batched:
             labels = np.asarray(self.teacher(raw), dtype=np.float32)
         else:
@@ -106,7 +114,9 @@ class TeacherCallback(BaseCallback):
         loss = th.tensor(0.0)
         for _ in range(self.epochs):
             for idx in th.randperm(len(obs_t), generator=self._gen).split(self.batch_size):
-                latent_pi = policy.mlp_extractor.forward_actor(policy.extract_features(obs_t[idx]))
+                features = policy.extract_features(obs_t[idx])
+                assert isinstance(features, th.Tensor)  # actor and critic share the extractor
+                latent_pi = policy.mlp_extractor.forward_actor(features)
                 loss = th.mean((policy.action_net(latent_pi) - act_t[idx]) ** 2)
                 self._optimizer.zero_grad()
                 loss.backward()
@@ -121,6 +131,11 @@ def _model_teacher(spec: str, env_id: str, shape: tuple[int, ...] | None) -> Any
     """A trained model as the teacher; refused where it plays another environment or takes
     other observations than the learner's."""
     policy = load_policy(spec)
+    if policy.recurrent:
+        raise ValueError(
+            f"teacher {spec} is a recurrent policy (RecurrentPPO): a teacher answers each "
+            "observation alone, so give a feed-forward one"
+        )
     if policy.env_id is not None and policy.env_id != env_id:
         raise ValueError(
             f"teacher {spec} was trained on {policy.env_id}, not on the learner's {env_id}"

@@ -163,6 +163,7 @@ def train(
     checkpoint = CheckpointCallback(out, config.checkpoint_freq)
     own: list[BaseCallback] = [stop, checkpoint]
     if config.self_play:
+        assert config.selfplay_threshold is not None  # config.check() sets the rule's default
         own.append(
             SelfPlayCallback(
                 window=config.selfplay_window,

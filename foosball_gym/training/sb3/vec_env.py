@@ -47,10 +47,13 @@ def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
         seed=config.seed + seed_offset,
         env_kwargs=config.env_kwargs,
         wrapper_class=wrapper,
-        vec_env_cls=VEC_ENVS[config.vec_env],
+        # SB3 calls vec_env_cls(env_fns, **kwargs), so a function like subproc_vec_env does,
+        # though it types the argument as one of its two classes.
+        vec_env_cls=VEC_ENVS[config.vec_env],  # type: ignore[arg-type]
     )
     if config.self_play:
         # The first opponent is replaced by a snapshot of the learner as training starts.
+        assert venv.action_space.shape is not None  # OpponentActionWrapper's Box
         n = venv.action_space.shape[0] // 2
         anchor = None
         if config.selfplay_scripted_share:

@@ -109,6 +109,7 @@ class SelfPlayCallback(BaseCallback):
                 replaced = self.judge.record(game_result(info))
                 if replaced is not None and self._gate_passes():
                     self._add_snapshot(*replaced)
+                    assert self._env is not None  # set as training starts
                     self._env.set_pool(self.pool)
         rates = self.judge.rates()
         if rates:

@@ -230,7 +230,7 @@ def run_players(
     which never kicked a ball at each other, drew every game between them 0-0).
     """
     from foosball_gym.training.loading import load_policy
-    from foosball_gym.training.loading.rllib_policy import load_rllib_snapshot
+    from foosball_gym.training.loading.rllib_policy import RllibPolicy, load_rllib_snapshot
     from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
 
     run_dir = Path(run_dir)
@@ -248,13 +248,14 @@ def run_players(
         if not path.is_file():
             raise ValueError(f"{run_dir}: generation {g} is in history.json but {path} is missing")
         if config.get("backend") == RLLIB_BACKEND:
-            policy = load_rllib_snapshot(path, config)
+            policy: PolicySnapshot | RllibPolicy = load_rllib_snapshot(path, config)
         else:
             policy = PolicySnapshot.load(path, trust=trust)
             policy.deterministic = not sampled
         players.append(Player(f"gen {g}", policy, g, by_generation[g].get("timesteps")))
     final = load_policy(run_dir, trust=trust)
-    final.policy.deterministic = not sampled
+    if isinstance(final.policy, PolicySnapshot):  # an RLlib policy acts on its mean only
+        final.policy.deterministic = not sampled
     timesteps = _final_timesteps(run_dir)
     players.append(Player("final", final, None, timesteps))
     return players, config
@@ -300,7 +301,7 @@ def plot_league(league: League, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(7, 4))
     run = [i for i, p in enumerate(league.players) if p.timesteps is not None]
     if run:
-        xs = [league.players[i].timesteps for i in run]
+        xs = [t for i in run if (t := league.players[i].timesteps) is not None]
         ys = r.elo[run]
         err = np.vstack([ys - r.low[run], r.high[run] - ys])
         ax.errorbar(xs, ys, yerr=err, fmt="o-", capsize=3, label="generations of the run")
@@ -316,10 +317,10 @@ def plot_league(league: League, path: Path) -> Path:
     if not run:
         # No run's generations to plot against their steps: the players side by side.
         order = [int(i) for i in np.argsort(r.elo, kind="stable")]
-        xs = np.arange(len(order))
+        places = np.arange(len(order))
         err = np.vstack([r.elo[order] - r.low[order], r.high[order] - r.elo[order]])
-        ax.errorbar(xs, r.elo[order], yerr=err, fmt="o", capsize=3)
-        ax.set_xticks(xs, [league.players[i].name for i in order])
+        ax.errorbar(places, r.elo[order], yerr=err, fmt="o", capsize=3)
+        ax.set_xticks(places, [league.players[i].name for i in order])
         ax.set_xlabel("player")
         others = []
     else:

@@ -11,10 +11,15 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 import numpy as np
+
+from foosball_gym.evaluation import start_episode
+
+if TYPE_CHECKING:
+    from foosball_gym.envs.base import FoosballEnv
 
 
 @dataclass
@@ -46,17 +51,18 @@ class Arena:
 
     def __init__(self, env_id: str, env_kwargs: dict[str, Any]) -> None:
         self.env = gym.make(env_id, **env_kwargs)
-        base = self.env.unwrapped
+        base = cast("FoosballEnv", self.env.unwrapped)
         if not getattr(base, "layout", None) or not base.layout.opponent:
             self.env.close()
             raise ValueError(f"{env_id} has no opponent: a league needs a two-player task")
         self.scripted = base.scripted_policy()
-        self.observation_size = int(np.prod(self.env.observation_space.shape))
+        self.observation_size = int(np.prod(base.observation_space.shape))
 
     def game(self, home: Player, away: Player, seed: int) -> tuple[int, int]:
         """Goals of ``home`` and ``away`` in one game served with ``seed``."""
-        self.env.unwrapped.set_opponent(away.policy)  # None: the scripted side
+        cast("FoosballEnv", self.env.unwrapped).set_opponent(away.policy)  # None: the scripted side
         policy = home.policy or self.scripted
+        start_episode(home.policy, away.policy)
         obs, info = self.env.reset(seed=seed)
         done = False
         while not done:

@@ -14,12 +14,16 @@ Which snapshots make the pool is the choice of
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs
+
+if TYPE_CHECKING:
+    from foosball_gym.envs.base import FoosballEnv
 
 OPPONENT_OBS = "opponent_obs"
 # In the info of a game's last step: the game was against the scripted anchor, not a snapshot.
@@ -46,10 +50,11 @@ class OpponentActionWrapper(gym.Wrapper):
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
-        base = env.unwrapped
+        base = cast("FoosballEnv", env.unwrapped)
         if not getattr(base, "layout", None) or not base.layout.opponent:
             raise ValueError(f"{base.spec.id if base.spec else base} has no opponent to play")
         own = env.action_space
+        assert own.shape is not None  # the environments act in a Box
         self._n = own.shape[0]
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2 * self._n,), dtype=np.float32)
         self._queued = _QueuedAction(self._n)
@@ -57,13 +62,13 @@ class OpponentActionWrapper(gym.Wrapper):
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
-        info[OPPONENT_OBS] = self.env.unwrapped.opponent_observation()
+        info[OPPONENT_OBS] = cast("FoosballEnv", self.env.unwrapped).opponent_observation()
         return obs, info
 
     def step(self, action: np.ndarray):
         self._queued.action = np.asarray(action[self._n :], dtype=np.float32)
         obs, reward, terminated, truncated, info = self.env.step(action[: self._n])
-        info[OPPONENT_OBS] = self.env.unwrapped.opponent_observation()
+        info[OPPONENT_OBS] = cast("FoosballEnv", self.env.unwrapped).opponent_observation()
         return obs, reward, terminated, truncated, info
 
 
@@ -88,6 +93,7 @@ class SelfPlayVecEnv(VecEnvWrapper):
         anchor: Any = None,
         anchor_share: float = 0.0,
     ) -> None:
+        assert venv.action_space.shape is not None  # OpponentActionWrapper's Box
         n = venv.action_space.shape[0] // 2
         learner_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
         super().__init__(venv, action_space=learner_space)
@@ -119,13 +125,14 @@ class SelfPlayVecEnv(VecEnvWrapper):
 
     # -- VecEnv -------------------------------------------------------------
 
-    def reset(self) -> np.ndarray:
+    def reset(self) -> VecEnvObs:
         obs = self.venv.reset()
         self._opp_obs = np.stack([info[OPPONENT_OBS] for info in self.venv.reset_infos])
         self._assigned = np.array([self._draw() for _ in range(self.num_envs)])
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
+        assert self._opp_obs is not None  # reset() sets it before any step
         start = time.perf_counter()
         opp = np.zeros_like(actions, dtype=np.float32)
         for k in np.unique(self._assigned):
@@ -139,6 +146,7 @@ class SelfPlayVecEnv(VecEnvWrapper):
 
     def step_wait(self):
         obs, rewards, dones, infos = self.venv.step_wait()
+        assert self._opp_obs is not None  # reset() sets it before any step
         for i, done in enumerate(dones):
             if done:
                 if self._assigned[i] == _ANCHOR:
@@ -150,7 +158,7 @@ class SelfPlayVecEnv(VecEnvWrapper):
         return obs, rewards, dones, infos
 
 
-def find_selfplay_env(env: VecEnv) -> SelfPlayVecEnv:
+def find_selfplay_env(env: VecEnv | None) -> SelfPlayVecEnv:
     while env is not None and not isinstance(env, SelfPlayVecEnv):
         env = getattr(env, "venv", None)
     if env is None:

@@ -147,6 +147,7 @@ class ReplacementRule:
         if not due:
             return None
         elo = self.elo()
+        assert elo is not None  # the window is full
         self.results.clear()
         return score, elo
 
