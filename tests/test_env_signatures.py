@@ -165,6 +165,19 @@ def test_the_real_table_builds_the_task_the_environment_plays(env_id, kwargs):
         env.close()
 
 
+@pytest.mark.parametrize("entry", ENVS, ids=lambda e: e.id)
+def test_a_task_and_its_environment_give_its_options_the_same_defaults(entry):
+    # The task's keyword arguments are the environment's too, each written in both signatures:
+    # a default changed in one place only would make a task built without its environment
+    # (Task(), as the PettingZoo games and scripts do) another task.
+    env_defaults = env_class(entry.id).option_defaults()
+    task_params = inspect.signature(entry.task).parameters
+    assert task_params, entry.task
+    for name, p in task_params.items():
+        assert name in env_defaults, name
+        assert p.default == env_defaults[name], name
+
+
 def test_gymnasium_registers_the_table():
     assert ENV_IDS == tuple(entry.id for entry in ENVS)
     for entry in ENVS:

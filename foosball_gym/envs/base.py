@@ -29,6 +29,9 @@ from foosball_gym.tasks.base import Task, check_ball_position, check_pair
 
 __all__ = ["RENDER_MODES", "FoosballEnv"]
 
+# Each reward term's info key, built once: infos are made at every step.
+_TERM_KEYS = tuple((f"reward_{name}", name) for name in TERMS)
+
 # What a reset reports: no goal, no dead ball and no reward yet.
 _NOTHING_YET = Outcome(goal=0, out_of_table=False, stagnated=False)
 
@@ -479,7 +482,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         if self.layout.opponent:
             info["goals_for"], info["goals_against"] = int(game.goals_for), int(game.goals_against)
         # Floats always: an integer weight would make some terms ints and others floats.
-        info.update(("reward_" + name, float(terms[name])) for name in TERMS)
+        info.update((key, float(terms[name])) for key, name in _TERM_KEYS)
         if self._dynamics:
             info["dynamics"] = dict(self._dynamics)
         return info
