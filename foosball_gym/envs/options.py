@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from foosball_gym.camera import check_image_side
 from foosball_gym.tasks.serves import check_range
 
 RENDER_MODES = ("human", "rgb_array")
@@ -53,10 +54,7 @@ def check_render(mode: Any, width: Any, height: Any) -> tuple[str | None, int, i
         raise ValueError(
             f"unknown render_mode {mode!r}; allowed: None, {', '.join(map(repr, RENDER_MODES))}"
         )
-    for name, value in (("render_width", width), ("render_height", height)):
-        if not isinstance(value, (int, np.integer)) or value <= 0:
-            raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    return mode, int(width), int(height)
+    return mode, check_image_side("render_width", width), check_image_side("render_height", height)
 
 
 def check_stagnation(value: Any) -> int:

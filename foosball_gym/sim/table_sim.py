@@ -44,7 +44,7 @@ from foosball_gym.camera import CameraModel
 from foosball_gym.physics_options import check_physics
 from foosball_gym.sim.contacts import Reach
 from foosball_gym.sim.drives import CONTROL_MODES, RodDrives, drive_acceleration
-from foosball_gym.sim.view import View
+from foosball_gym.sim.view import View, check_image_size
 from foosball_gym.sim.worlds import ERP_RATE, UPRIGHT, TableWorlds, World, drive_masses
 
 __all__ = ["AWAY_SCORED", "CONTROL_MODES", "HOME_SCORED", "NO_GOAL", "BallState", "TableSim"]
@@ -483,6 +483,7 @@ class TableSim:
     def render(self, width: int = 320, height: int = 180, layered: bool = True) -> np.ndarray:
         """An (height, width, 3) uint8 top view from the CPU renderer (see
         :meth:`View.render`)."""
+        check_image_size(width, height)  # before a view is built for it
         return self._posed_view().render(width, height, layered)
 
     def close(self) -> None:
