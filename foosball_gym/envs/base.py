@@ -322,13 +322,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         if self._closed:
             raise gym.error.ClosedEnvironmentError("the environment is closed; make a new one")
         allowed = self.task.reset_options
-        if options is not None and not isinstance(options, Mapping):
-            raise ValueError(
-                f"reset options must be a dict of option names to values, got "
-                f"{type(options).__name__} {options!r}; allowed names: {', '.join(allowed)}"
-            )
+        options = env_options.reset_options(options, allowed)
         super().reset(seed=seed)
-        options = dict(options or {})
         unknown = set(options) - set(allowed)
         if unknown:
             raise ValueError(

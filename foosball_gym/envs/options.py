@@ -15,7 +15,7 @@ import inspect
 import math
 import re
 import typing
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -55,6 +55,19 @@ def check_render(mode: Any, width: Any, height: Any) -> tuple[str | None, int, i
             f"unknown render_mode {mode!r}; allowed: None, {', '.join(map(repr, RENDER_MODES))}"
         )
     return mode, check_image_side("render_width", width), check_image_side("render_height", height)
+
+
+def reset_options(options: Any, allowed: Iterable[str]) -> dict[str, Any]:
+    """``reset``'s options as a dict (None: none), or a ValueError for anything that is not a
+    mapping of names to values (a list of them was read as pairs, or as nothing)."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise ValueError(
+            f"reset options must be a dict of option names to values, got "
+            f"{type(options).__name__} {options!r}; allowed names: {', '.join(allowed)}"
+        )
+    return dict(options)
 
 
 def check_stagnation(value: Any) -> int:
