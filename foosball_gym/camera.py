@@ -9,6 +9,24 @@ from typing import Any
 
 import numpy as np
 
+# The largest image side (pixels) the simulator renders: 4K. A 4096 x 4096 frame of the full
+# table takes the process to 1.2 GB; a side of 10**6 crashed it.
+MAX_IMAGE_SIDE = 4096
+
+
+def check_image_side(name: str, value: Any) -> int:
+    """An image side in pixels, or a ValueError unless it is a whole number in
+    [1, MAX_IMAGE_SIDE]."""
+    if (
+        not isinstance(value, (int, np.integer))
+        or isinstance(value, bool)
+        or not 1 <= value <= MAX_IMAGE_SIDE
+    ):
+        raise ValueError(
+            f"{name} must be a whole number of pixels in [1, {MAX_IMAGE_SIDE}], got {value!r}"
+        )
+    return int(value)
+
 
 @dataclass(frozen=True)
 class CameraModel:

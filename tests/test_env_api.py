@@ -10,6 +10,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 from foosball_gym import ENV_IDS, table
+from foosball_gym.sim import TableSim
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
@@ -53,6 +54,17 @@ def test_rgb_array_render_is_a_top_view_image(env_id, make_env):
     # The green field fills the middle of the picture.
     r, g, b = frame[45, 60].astype(int)
     assert g > r and g > b
+
+
+@pytest.mark.parametrize("size", [(10**6, 180), (320, 5000), (0, 180), (320.5, 180)])
+def test_the_simulator_refuses_an_image_size_beyond_4k_before_drawing(size):
+    sim = TableSim(["home_keeper"])
+    try:
+        with pytest.raises(ValueError, match=r"must be a whole number of pixels in \[1, 4096\]"):
+            sim.render(*size)
+        assert sim._view is None  # no world was built to draw it
+    finally:
+        sim.close()
 
 
 def test_human_render_opens_the_gui(display, make_env):
@@ -123,12 +135,55 @@ def test_reset_options_place_the_ball_exactly(make_env):
         ({"ball_position": (2.0, 0.0)}, "off the field"),
         ({"ball_position": (0.1,)}, "two numbers"),
         ({"ball_velocity": (math.nan, 0.0)}, "finite"),
+        ({"ball_velocity": (250.0, 0.0)}, r"250 m/s; the table is built for balls up to 20 m/s"),
+        ({"ball_velocity": (-15.0, 15.0)}, r"must be in \[0, 20\]"),
+        ([("ball_position", (0.0, 0.0))], "must be a dict of option names to values, got list"),
+        ([], "must be a dict"),
+        ("ball_position", "must be a dict"),
     ],
 )
 def test_bad_reset_options_raise_a_clear_error(make_env, options, message):
     env = make_env("Foosball-Block-v0")
     with pytest.raises(ValueError, match=message):
         env.reset(options=options)
+
+
+@pytest.mark.parametrize(
+    "position, velocity",
+    [
+        ((0.3, 0.0), (0.0, 20.0)),  # at a side wall
+        ((0.0, 0.25), (-20.0, 0.0)),  # at the end wall beside the goal
+        ((0.0, 0.11), (-20.0, 0.0)),  # at a goal post
+        ((0.3, 0.0), (-20.0 * math.cos(0.5), 20.0 * math.sin(0.5))),  # off a wall, then on
+    ],
+)
+def test_a_ball_as_fast_as_the_table_is_built_for_stays_on_it(make_env, position, velocity):
+    env = make_env("Foosball-Block-v0")
+    obs, _ = env.reset(seed=0, options={"ball_position": position, "ball_velocity": velocity})
+    assert math.hypot(obs[4], obs[5]) == pytest.approx(20.0, rel=1e-6)
+    for _ in range(90):
+        obs, _, terminated, truncated, info = env.step([1.0])  # the keeper out of the way
+        assert not info["out_of_table"]
+        if info["goal"]:
+            assert abs(obs[3]) <= table.GOAL_HALF_WIDTH
+            break
+        x, y = abs(obs[2]), abs(obs[3])
+        assert y <= table.FIELD_HALF_WIDTH
+        assert x <= table.FIELD_HALF_LENGTH or y <= table.GOAL_HALF_WIDTH  # or in the mouth
+
+
+def test_a_ball_against_an_obstacle_placed_by_hand_is_refused(make_env):
+    env = make_env("Foosball-Score-v0", obstacles=True)
+    defense = table.rod("away_defense")
+    ball = (defense.x, defense.figurine_y(0.0)[0] + 0.01)
+    with pytest.raises(ValueError, match="lies against a figurine of away_defense"):
+        env.reset(options={"ball_position": ball, "obstacle_positions": (0.0, 0.0, 0.0)})
+    # One gap from it is clear, and the obstacle stays where it was put.
+    ball = (defense.x, defense.figurine_y(0.0)[0] + 0.037)
+    env.reset(options={"ball_position": ball, "obstacle_positions": (0.0, 0.0, 0.0)})
+    assert list(env.unwrapped.game.positions[1:4]) == [0.0, 0.0, 0.0]
+    # Drawn by the task, an obstacle is slid beside the ball, as the keeper is.
+    env.reset(seed=0, options={"ball_position": ball})
 
 
 def test_block_episode_is_90_steps_unless_a_goal_ends_it(make_env):
@@ -167,6 +222,10 @@ def test_render_fps_follows_the_control_step():
         ({"rolling_resistance": math.nan}, "rolling_resistance"),
         ({"contact_travel": 0.5}, "contact_travel must be a number in"),
         ({"rolling_resistance_range": (0.02, 0.01)}, "rolling_resistance_range"),
+        ({"speed_range": (2.0, 25.0)}, r"speed_range must satisfy 0.001 <= low <= high <= 20"),
+        ({"render_width": 10**6}, r"render_width must be a whole number of pixels in \[1, 4096\]"),
+        ({"render_height": 0}, r"render_height must be a whole number of pixels in \[1, 4096\]"),
+        ({"render_width": 320.0}, "render_width must be a whole number"),
     ],
 )
 def test_bad_constructor_arguments_raise_a_clear_error(kwargs, message):

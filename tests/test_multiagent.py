@@ -273,6 +273,8 @@ def test_bad_actions_and_reset_options_are_refused(make_game):
         game.reset(options={"ball_position": (2.0, 0.0)})
     with pytest.warns(UserWarning, match="unknown reset option"):
         game.reset(options={"serve": "left"})
+    with pytest.raises(ValueError, match="reset options must be a dict"):
+        game.reset(options=[("ball_position", (0.0, 0.0))])
     game.close()
     with pytest.raises(gym.error.ClosedEnvironmentError):
         game.step({"home": still, "away": still})

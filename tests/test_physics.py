@@ -10,6 +10,7 @@ import pytest
 
 from foosball_gym import table
 from foosball_gym.sim import AWAY_SCORED, HOME_SCORED, NO_GOAL, TableSim
+from foosball_gym.sim.table_sim import inside_walls
 
 
 @pytest.fixture
@@ -94,7 +95,7 @@ def test_ball_passing_beside_a_figurine_is_not_touched(keeper_sim):
     assert y == pytest.approx(0.036, abs=1e-4) and vy == pytest.approx(0.0, abs=1e-3)
 
 
-@pytest.mark.parametrize("speed", [5.0, 15.0])
+@pytest.mark.parametrize("speed", [5.0, 15.0, 20.0])
 def test_ball_bounces_off_a_side_wall_and_stays_on_the_table(keeper_sim, speed):
     keeper_sim.reset(slide=[0.12], ball_position=(0.3, 0.0), ball_velocity=(0.0, speed))
     ys = []
@@ -112,8 +113,9 @@ def test_ball_bounces_off_a_side_wall_and_stays_on_the_table(keeper_sim, speed):
     assert ys[-1] < max(ys)  # ... and came back
 
 
-def test_fast_ball_at_the_end_wall_beside_the_goal_stays_on_the_table(keeper_sim):
-    keeper_sim.reset(slide=[0.0], ball_position=(0.3, 0.25), ball_velocity=(15.0, 0.0))
+@pytest.mark.parametrize("speed", [15.0, 20.0])
+def test_fast_ball_at_the_end_wall_beside_the_goal_stays_on_the_table(keeper_sim, speed):
+    keeper_sim.reset(slide=[0.0], ball_position=(0.3, 0.25), ball_velocity=(speed, 0.0))
     for _ in range(30):
         goal, out = keeper_sim.step()
         assert goal == NO_GOAL and not out
@@ -125,6 +127,42 @@ def test_ball_thrown_upwards_is_out_of_table(keeper_sim):
     keeper_sim.reset(ball_position=(0.2, 0.0, 0.05), ball_velocity=(0.0, 0.0, 3.0))
     goal, out, _ = run(keeper_sim, 30)
     assert out and goal == NO_GOAL
+
+
+@pytest.mark.parametrize(
+    "position, velocity",
+    [
+        ((0.0, 0.2), (0.0, 250.0)),  # through a side wall: far faster than the table is built for
+        ((0.2, 0.0, -0.05), (0.0, 0.0)),  # under the surface
+        ((0.0, 0.5), (0.0, 0.0)),  # beside the table
+        ((0.64, 0.2), (0.0, 0.0)),  # in the end wall beside the goal
+    ],
+)
+def test_a_ball_outside_the_walls_is_out_of_the_table(keeper_sim, position, velocity):
+    keeper_sim.reset(ball_position=position, ball_velocity=velocity)
+    assert run(keeper_sim, 5) == (NO_GOAL, True, 1)
+
+
+def test_the_table_holds_the_field_the_goal_mouths_and_their_pockets():
+    r = table.BALL_RADIUS
+    inside = [
+        (0.0, 0.0, r),
+        (table.BALL_LIMIT_X, table.BALL_LIMIT_Y, r),
+        (-table.GOAL_LINE_X, 0.08, r),  # in the mouth
+        (table.POCKET_BACK_X - r, -0.08, r),  # in the pocket
+        (0.3, 0.1, table.OUT_OF_TABLE_HEIGHT - 0.01),  # in the air
+    ]
+    outside = [
+        (0.0, table.FIELD_HALF_WIDTH + table.WALL_THICKNESS, r),  # past a side wall's middle
+        (table.GOAL_LINE_X + 0.01, 0.2, r),  # in the end wall beside the goal
+        (table.POCKET_BACK_X + 0.015, 0.0, r),  # through the pocket's back
+        (table.GOAL_LINE_X + 0.03, 0.0, table.GOAL_HEIGHT + 0.03),  # through the pocket's roof
+        (0.0, 0.0, -0.02),  # through the surface
+        (0.0, 0.0, table.OUT_OF_TABLE_HEIGHT + 0.01),  # flown off
+        (5.0, 0.0, r),
+    ]
+    assert all(inside_walls(*p) for p in inside)
+    assert not any(inside_walls(*p) for p in outside)
 
 
 def test_ball_rolling_slowly_keeps_rolling_straight(keeper_sim):

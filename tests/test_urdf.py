@@ -195,25 +195,51 @@ def test_wheel_ships_the_urdf_and_the_cli_and_an_installed_copy_runs(tmp_path):
     assert "ok" in out.stdout
 
 
-def test_a_file_planted_under_the_cached_urdf_name_is_not_trusted(tmp_path, monkeypatch):
-    """The rod-subset URDF is cached in the shared temp folder; another user's file there
-    under the same name must not become the table."""
+def test_table_urdfs_rewritten_between_two_envs_do_not_change_the_second(tmp_path, monkeypatch):
+    """Bullet loads a URDF from a file: another user who rewrites one that a first env left
+    in the temp folder must not change the table of the next."""
     import tempfile
-    from pathlib import Path
+    import xml.etree.ElementTree as ET
 
-    from foosball_gym.sim import TableSim
-    from foosball_gym.sim.urdf import urdf_with_rods as _urdf_with_rods
+    import gymnasium as gym
 
-    # A temp folder of this test's own: the shared one's file is in use by other processes.
+    from foosball_gym.sim.urdf import urdf_with_rods
+
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    rods = ("home_keeper",)
-    _urdf_with_rods.cache_clear()
-    path = Path(_urdf_with_rods(rods))
-    genuine = path.read_text()
-    path.write_text(genuine.replace("home_keeper_slide", "planted_slide"))
-    _urdf_with_rods.cache_clear()
-    assert Path(_urdf_with_rods(rods)).read_text() == genuine
-    assert path.parent == tmp_path
-    sim = TableSim(rods)
-    sim.close()
-    _urdf_with_rods.cache_clear()
+    urdf_with_rods.cache_clear()  # nothing from before this test's temp folder
+
+    def shot_at_the_keeper() -> int:
+        env = gym.make("Foosball-Block-v0")
+        env.reset(options={"ball_position": (-0.3, 0.0), "ball_velocity": (-4.0, 0.0)})
+        for _ in range(60):
+            _, _, terminated, _, info = env.step([0.0])
+            if terminated:
+                break
+        env.close()
+        return info["goal"]
+
+    assert shot_at_the_keeper() == 0  # blocked
+    left = list(tmp_path.rglob("*.urdf"))
+    for path in left:  # the keeper without a collision shape, were it read again
+        tree = ET.parse(path)
+        for link in tree.getroot().iter("link"):
+            if link.get("name", "").startswith("home_keeper"):
+                for collision in link.findall("collision"):
+                    link.remove(collision)
+        tree.write(path)
+    assert shot_at_the_keeper() == 0
+    assert left == []
+
+
+def test_the_urdf_bullet_reads_is_in_a_folder_only_its_user_opens_and_gone_after():
+    import os
+    import stat
+
+    from foosball_gym.sim.urdf import urdf_file, urdf_with_rods
+
+    text = urdf_with_rods(("home_keeper",))
+    with urdf_file(text) as path:
+        folder = os.stat(os.path.dirname(path))
+        assert stat.S_IMODE(folder.st_mode) == 0o700 and folder.st_uid == os.getuid()
+        assert Path(path).read_text() == text
+    assert not os.path.exists(os.path.dirname(path))

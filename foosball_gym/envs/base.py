@@ -25,7 +25,7 @@ from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
 from foosball_gym.game import Game, Outcome, Policy, portable, unpacked
 from foosball_gym.policy_io.observations import check_flag, observation_options
 from foosball_gym.policy_io.task import TaskInterface, check_action, residual_action
-from foosball_gym.tasks.base import Task, check_ball_position, check_pair
+from foosball_gym.tasks.base import Task, check_ball_position, check_ball_velocity
 
 __all__ = ["RENDER_MODES", "FoosballEnv"]
 
@@ -51,7 +51,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
 
     - `goal_reward`: the weight of a goal: `+goal_reward` for one scored, `-goal_reward` for
       one conceded.
-    - `out_of_table_penalty`: `-out_of_table_penalty` when the ball leaves the table upwards.
+    - `out_of_table_penalty`: `-out_of_table_penalty` when the ball leaves the table
+      (upwards, or through a wall).
     - `ball_to_goal_weight`: the weight of the potential of the ball's distance to the
       opponent's goal (0: off).
     - `figurine_to_ball_weight`: the weight of the potential of the controlled figurines'
@@ -111,7 +112,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
 
     - `render_mode`: `None`, `"rgb_array"` (a top view) or `"human"` (the PyBullet GUI, kept
       to real time).
-    - `render_width`, `render_height`: the size of `"rgb_array"` frames in pixels.
+    - `render_width`, `render_height`: the size of `"rgb_array"` frames in pixels, each
+      within [1, 4096].
 
     Physics:
 
@@ -319,9 +321,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         if self._closed:
             raise gym.error.ClosedEnvironmentError("the environment is closed; make a new one")
-        super().reset(seed=seed)
-        options = dict(options or {})
         allowed = self.task.reset_options
+        options = env_options.reset_options(options, allowed)
+        super().reset(seed=seed)
         unknown = set(options) - set(allowed)
         if unknown:
             raise ValueError(
@@ -332,7 +334,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         if ball_position is not None:
             ball_position = check_ball_position("ball_position", ball_position)
         if ball_velocity is not None:
-            ball_velocity = check_pair("ball_velocity", ball_velocity)
+            ball_velocity = check_ball_velocity("ball_velocity", ball_velocity)
         self._dynamics = self._randomise_dynamics()
         if self._estimated is not None:
             self._estimated.rng = self.np_random

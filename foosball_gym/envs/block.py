@@ -36,7 +36,7 @@ class BlockEnv(FoosballEnv):
 
     ## Rewards
     `-goal_reward` (-1000) when a goal is conceded, `-out_of_table_penalty` (-1000) when
-    the ball leaves the table upwards; no shaping by default, as in the authors' blocking task.
+    the ball leaves the table; no shaping by default, as in the authors' blocking task.
     Every term is in `info["reward_<name>"]`.
 
     ## Starting State
@@ -49,7 +49,7 @@ class BlockEnv(FoosballEnv):
     `speed_range=(2, 10), serve_x_range=(-0.1, 0.45), serve_y_range=(-0.32275, 0.32275),
     bank_share=0.5`.
     `reset(options={"ball_position": (x, y), "ball_velocity": (vx, vy)})` places the ball
-    exactly; with only a position, the shot is aimed from there.
+    exactly (at most 20 m/s); with only a position, the shot is aimed from there.
 
     ## Episode End
     Terminated on a goal (either way) or when the ball leaves the table; truncated after 90
@@ -57,7 +57,8 @@ class BlockEnv(FoosballEnv):
     so far. `info["goal"]`: +1 scored, -1 conceded, 0 none.
 
     ## Arguments
-    - `speed_range`: the shots' speeds in m/s, `(low, high)`, drawn uniformly; at most 30.
+    - `speed_range`: the shots' speeds in m/s, `(low, high)`, drawn uniformly; at most 20,
+      the fastest ball the table is built for.
     - `serve_x_range`: where along the table the ball starts, `(low, high)` in m, seen from
       the goal under fire; within [-0.1, 0.48275].
     - `serve_y_range`: where across the table the ball starts, `(low, high)` in m; within

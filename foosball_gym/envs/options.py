@@ -15,11 +15,12 @@ import inspect
 import math
 import re
 import typing
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
 
+from foosball_gym.camera import check_image_side
 from foosball_gym.tasks.serves import check_range
 
 RENDER_MODES = ("human", "rgb_array")
@@ -53,10 +54,20 @@ def check_render(mode: Any, width: Any, height: Any) -> tuple[str | None, int, i
         raise ValueError(
             f"unknown render_mode {mode!r}; allowed: None, {', '.join(map(repr, RENDER_MODES))}"
         )
-    for name, value in (("render_width", width), ("render_height", height)):
-        if not isinstance(value, (int, np.integer)) or value <= 0:
-            raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    return mode, int(width), int(height)
+    return mode, check_image_side("render_width", width), check_image_side("render_height", height)
+
+
+def reset_options(options: Any, allowed: Iterable[str]) -> dict[str, Any]:
+    """``reset``'s options as a dict (None: none), or a ValueError for anything that is not a
+    mapping of names to values (a list of them was read as pairs, or as nothing)."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise ValueError(
+            f"reset options must be a dict of option names to values, got "
+            f"{type(options).__name__} {options!r}; allowed names: {', '.join(allowed)}"
+        )
+    return dict(options)
 
 
 def check_stagnation(value: Any) -> int:

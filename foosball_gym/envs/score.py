@@ -58,7 +58,7 @@ class ScoreEnv(FoosballEnv):
       `"incoming"`, shot at the home goal.
     - `obstacles`: put the away keeper, defense and offense in the way, still.
     - `speed_range`: the incoming shots' speeds in m/s, `(low, high)`, drawn uniformly; at
-      most 30.
+      most 20, the fastest ball the table is built for.
     - `serve_x_range`: where along the table an incoming ball starts, `(low, high)` in m,
       seen from the goal under fire; within [-0.1, 0.48275].
     - `serve_y_range`: where across the table an incoming ball starts, `(low, high)` in m;

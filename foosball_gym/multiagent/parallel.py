@@ -18,6 +18,7 @@ from pettingzoo import ParallelEnv
 
 from foosball_gym import table
 from foosball_gym.envs.base import RENDER_MODES, FoosballEnv
+from foosball_gym.envs.options import reset_options
 from foosball_gym.envs.rewards import TERMS, RewardComputer
 from foosball_gym.multiagent.state import TrueState
 from foosball_gym.policy_io.observations import check_flag, mirrored_builder
@@ -185,7 +186,7 @@ class FoosballParallelEnv(ParallelEnv):
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
-        options = dict(options or {})
+        options = reset_options(options, self._env.task.reset_options)
         unknown = sorted(set(options) - set(self._env.task.reset_options))
         if unknown:
             # PettingZoo's API test resets with an option no game knows; its environments

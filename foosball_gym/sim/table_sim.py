@@ -44,10 +44,18 @@ from foosball_gym.camera import CameraModel
 from foosball_gym.physics_options import check_physics
 from foosball_gym.sim.contacts import Reach
 from foosball_gym.sim.drives import CONTROL_MODES, RodDrives, drive_acceleration
-from foosball_gym.sim.view import View
+from foosball_gym.sim.view import View, check_image_size
 from foosball_gym.sim.worlds import ERP_RATE, UPRIGHT, TableWorlds, World, drive_masses
 
-__all__ = ["AWAY_SCORED", "CONTROL_MODES", "HOME_SCORED", "NO_GOAL", "BallState", "TableSim"]
+__all__ = [
+    "AWAY_SCORED",
+    "CONTROL_MODES",
+    "HOME_SCORED",
+    "NO_GOAL",
+    "BallState",
+    "TableSim",
+    "inside_walls",
+]
 
 NO_GOAL, HOME_SCORED, AWAY_SCORED = table.NO_GOAL, table.HOME_SCORED, table.AWAY_SCORED
 
@@ -56,6 +64,27 @@ NO_GOAL, HOME_SCORED, AWAY_SCORED = table.NO_GOAL, table.HOME_SCORED, table.AWAY
 class BallState:
     position: np.ndarray  # (3,) metres
     velocity: np.ndarray  # (3,) m/s
+
+
+# How deep (m) the ball's centre may be in a wall, the surface or a pocket's wall before it
+# counts as gone through: half the thinnest of them, where Bullet pushes it out on the far
+# side. A ball that bounces stays a radius off, short of its surface.
+_THROUGH = table.WALL_THICKNESS / 2
+
+
+def inside_walls(x: float, y: float, z: float) -> bool:
+    """Whether the ball's centre ``(x, y, z)`` is within the table: over the field below
+    OUT_OF_TABLE_HEIGHT, or in a goal mouth or its pocket."""
+    ax, ay = abs(x), abs(y)
+    if z < -_THROUGH or z > table.OUT_OF_TABLE_HEIGHT:
+        return False
+    if ax <= table.FIELD_HALF_LENGTH + _THROUGH and ay <= table.FIELD_HALF_WIDTH + _THROUGH:
+        return True
+    return (
+        ax <= table.POCKET_BACK_X + _THROUGH
+        and ay <= table.GOAL_HALF_WIDTH + _THROUGH
+        and z <= table.GOAL_HEIGHT + _THROUGH
+    )
 
 
 class TableSim:
@@ -316,7 +345,9 @@ class TableSim:
 
         Returns:
             ``(goal, out_of_table)``: goal is :data:`HOME_SCORED`, :data:`AWAY_SCORED` or
-            :data:`NO_GOAL`. Stepping stops at the physics step where either event happens.
+            :data:`NO_GOAL`. Stepping stops at the physics step where either event happens. A
+            ball found outside the walls at the end of the step (see :func:`inside_walls`) is
+            out of the table too.
         """
         drives, substeps, n, worlds = self._drives, self.substeps, self._n, self._worlds
         steps, touching = self._reach.plan(self._ball(), self.control_dt)
@@ -347,6 +378,8 @@ class TableSim:
             far = [i for i in range(n) if i not in touching]
             drives.advance([*far, *(n + i for i in far)], base, taken)
         self._ball_state = self._world.ball_state()
+        if result == (NO_GOAL, False) and not inside_walls(*self._ball()[:3]):
+            result = (NO_GOAL, True)  # through a wall: too fast a ball, a kick into a post
         if self._view is not None:
             self._sync_view()
         return result
@@ -483,6 +516,7 @@ class TableSim:
     def render(self, width: int = 320, height: int = 180, layered: bool = True) -> np.ndarray:
         """An (height, width, 3) uint8 top view from the CPU renderer (see
         :meth:`View.render`)."""
+        check_image_size(width, height)  # before a view is built for it
         return self._posed_view().render(width, height, layered)
 
     def close(self) -> None:

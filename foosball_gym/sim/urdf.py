@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import hashlib
+import contextlib
 import os
 import tempfile
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
 from functools import cache
 from importlib import resources
 from pathlib import Path
@@ -24,7 +25,7 @@ def urdf_path(name: str = "foosball_table.urdf") -> Path:
 
 @cache
 def urdf_with_rods(rod_names: tuple[str, ...]) -> str:
-    """The table URDF with only the given rods, written once per process and rod set."""
+    """The table URDF's text with only the given rods, built once per process and rod set."""
     tree = ET.parse(urdf_path())
     robot = tree.getroot()
     keep = set(rod_names)
@@ -44,25 +45,27 @@ def urdf_with_rods(rod_names: tuple[str, ...]) -> str:
     # The copy lives elsewhere, so the meshes it names are given by their full path.
     for mesh in robot.iter("mesh"):
         mesh.set("filename", str(urdf_path(mesh.get("filename", ""))))
-    text = ET.tostring(robot, encoding="unicode")
-    # Named by content, so processes share one file and a changed table gets a new one.
-    digest = hashlib.sha1(text.encode()).hexdigest()[:16]
-    path = Path(tempfile.gettempdir()) / f"foosball_gym_{digest}.urdf"
-    # Anyone can write to the temp folder: a file under this name is used only if it holds
-    # exactly this table.
-    if not _holds(path, text):
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".urdf")
+    return ET.tostring(robot, encoding="unicode")
+
+
+@contextlib.contextmanager
+def urdf_file(text: str) -> Iterator[str]:
+    """The path of a file holding ``text`` while the context lasts, for Bullet, which loads a
+    URDF only from a file.
+
+    The file is written into a folder made for it that only this user can open (mode 0700)
+    and removed with it afterwards, so what Bullet reads is what was written here: no one
+    else can put a table of their own in its place between the writing and the loading (in
+    a shared temp folder, a file another user made first, or rewrote later, was loaded as
+    it was).
+    """
+    with tempfile.TemporaryDirectory(prefix="foosball_gym_") as folder:
+        path = os.path.join(folder, "table.urdf")
+        # O_EXCL: a fresh file of this user's, never one that was there.
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         with os.fdopen(fd, "w") as f:
             f.write(text)
-        os.replace(tmp, path)
-    return str(path)
-
-
-def _holds(path: Path, text: str) -> bool:
-    try:
-        return path.read_text() == text
-    except (OSError, UnicodeDecodeError):
-        return False
+        yield path
 
 
 def _find(element: ET.Element, tag: str) -> ET.Element:

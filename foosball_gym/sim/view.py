@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from foosball_gym import table
-from foosball_gym.camera import CameraModel
+from foosball_gym.camera import CameraModel, check_image_side
 from foosball_gym.sim.worlds import UPRIGHT, World, pybullet
 
 # The names :meth:`View.keyboard_events` gives PyBullet's codes of keys without a character.
@@ -26,6 +26,12 @@ _KEY_NAMES = {
 # Where :meth:`View.show_text` writes: beyond the side walls, a line apart (m).
 _TEXT_MARGIN = 0.09
 _TEXT_LINE = 0.04
+
+
+def check_image_size(width: int, height: int) -> None:
+    """Raise a ValueError unless both sides are whole numbers in [1, MAX_IMAGE_SIDE]."""
+    check_image_side("image width", width)
+    check_image_side("image height", height)
 
 
 class View:
@@ -129,8 +135,7 @@ class View:
         pixel) in a quarter of the time for one rod, since the field and walls fill most of
         the frame. Without a GUI only: there the fixed parts must stay on the screen.
         """
-        if width <= 0 or height <= 0:
-            raise ValueError(f"image size must be positive, got {width}x{height}")
+        check_image_size(width, height)
         self.camera(width, height)
         if not layered or self.gui:
             self._show_fixed_parts(True)

@@ -25,7 +25,7 @@ from functools import cache
 from typing import TYPE_CHECKING
 
 from foosball_gym import table
-from foosball_gym.sim.urdf import urdf_path, urdf_with_rods
+from foosball_gym.sim.urdf import urdf_file, urdf_path, urdf_with_rods
 
 if TYPE_CHECKING:
     from foosball_gym.sim.drives import RodDrives
@@ -102,8 +102,8 @@ def drive_masses(names: tuple[str, ...]) -> tuple[tuple[float, ...], tuple[float
     """
     client = connect()
     try:
-        with _quiet_stdout():
-            body = client.loadURDF(urdf_with_rods(names), useFixedBase=True)
+        with urdf_file(urdf_with_rods(names)) as path, _quiet_stdout():
+            body = client.loadURDF(path, useFixedBase=True)
         index = {
             client.getJointInfo(body, i)[1].decode(): i for i in range(client.getNumJoints(body))
         }
@@ -168,8 +168,8 @@ class World:
             p.configureDebugVisualizer(pybullet.COV_ENABLE_SHADOWS, 0)
             # Looking down with the home goal on the left: the screen's right is +x, its up +y.
             p.resetDebugVisualizerCamera(1.1, 0, -89.9, [0, 0, 0])
-        with _quiet_stdout():
-            self.body = p.loadURDF(urdf_with_rods(self.names), useFixedBase=True)
+        with urdf_file(urdf_with_rods(self.names)) as path, _quiet_stdout():
+            self.body = p.loadURDF(path, useFixedBase=True)
         index = {
             p.getJointInfo(self.body, i)[1].decode(): i for i in range(p.getNumJoints(self.body))
         }

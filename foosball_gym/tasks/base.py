@@ -19,6 +19,20 @@ from foosball_gym.policies.ladder import Level, Policy, level_of
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.task import Layout
 
+# The fastest ball the simulated table is built for (m/s): real play's fastest shots, which
+# it keeps out of figurines, walls and posts (SPEC: 15-20 m/s). Served balls and balls placed
+# by hand are held to it.
+MAX_BALL_SPEED = table.RESOLVED_SPEED
+# A ball this close to a figurine's overall box (m, along y) counts as touching it at a start.
+CLEARANCE = 0.002
+# How far (m, along x) from a rod's axis a resting ball reaches a hanging figurine's box.
+REACH_X = table.FIGURINE_SIZE[0] / 2 + table.BALL_RADIUS
+# How far (m, along y) from a figurine's centre a resting ball starts clear of it.
+GAP_Y = table.FIGURINE_SIZE[1] / 2 + table.BALL_RADIUS + CLEARANCE
+# A figurine moved to GAP_Y beside the ball lands there give or take a rounding error; it is
+# clear within this much (m) of it, or it would be moved to the same place again and again.
+_ROUNDING = 1e-9
+
 
 @dataclass
 class Start:
@@ -50,24 +64,50 @@ def check_ball_position(name: str, value: Any) -> tuple[float, float]:
     return x, y
 
 
+def check_ball_velocity(name: str, value: Any) -> tuple[float, float]:
+    """A ball velocity no faster than the simulated table keeps physical, or a ValueError
+    saying what is allowed."""
+    vx, vy = check_pair(name, value)
+    speed = math.hypot(vx, vy)
+    if speed > MAX_BALL_SPEED:
+        raise ValueError(
+            f"option {name!r} = ({vx}, {vy}) is {speed:.4g} m/s; the table is built for balls "
+            f"up to {MAX_BALL_SPEED:g} m/s: hypot(vx, vy) must be in [0, {MAX_BALL_SPEED:g}]"
+        )
+    return vx, vy
+
+
+def figurine_at_ball(rod: table.Rod, slide: float, ball: tuple[float, float]) -> int | None:
+    """The index of the first of ``rod``'s hanging figurines that a resting ball at ``ball``
+    touches (within CLEARANCE) with the rod at ``slide``, or None where it touches none."""
+    bx, by = ball
+    if abs(bx - rod.x) >= REACH_X:
+        return None
+    for k, fig_y in enumerate(rod.figurine_y(slide)):
+        if abs(fig_y - by) < GAP_Y - _ROUNDING:
+            return k
+    return None
+
+
 def clear_of_ball(rod: table.Rod, slide: float, ball: tuple[float, float]) -> float:
-    """A slide value near ``slide`` at which no figurine of ``rod`` overlaps the ball.
+    """A slide value near ``slide`` at which no figurine of ``rod`` touches the ball.
 
     Tasks put the ball at rest close to a rod; starting with a figurine inside the ball would
-    throw it across the table on the first step.
+    throw it across the table on the first step. A touching figurine is slid just beside the
+    ball, on its own side where the rod's range allows, else on the other; the figurines are
+    further apart than two such gaps, so that leaves none touching (a test tries every rod).
     """
-    bx, by = ball
-    reach_x = table.FIGURINE_SIZE[0] / 2 + table.BALL_RADIUS
-    if abs(bx - rod.x) >= reach_x:
-        return slide
-    gap = table.FIGURINE_SIZE[1] / 2 + table.BALL_RADIUS + 0.002
-    for off, fig_y in zip(rod.figurine_offsets, rod.figurine_y(slide)):
-        if abs(fig_y - by) < gap:
-            # Move the figurine just beside the ball, on whichever side stays within the limits.
-            for side in (np.sign(fig_y - by) or 1.0, -(np.sign(fig_y - by) or 1.0)):
-                candidate = rod.direction * (by + side * gap) - off
-                if abs(candidate) <= rod.slide_limit:
-                    return clear_of_ball(rod, candidate, ball)
+    for _ in rod.figurine_offsets:
+        k = figurine_at_ball(rod, slide, ball)
+        if k is None:
+            break
+        off, by = rod.figurine_offsets[k], ball[1]
+        away = 1.0 if rod.figurine_y(slide)[k] - by >= 0.0 else -1.0
+        for side in (away, -away):
+            candidate = rod.direction * (by + side * GAP_Y) - off
+            if abs(candidate) <= rod.slide_limit:
+                slide = candidate
+                break
     return slide
 
 

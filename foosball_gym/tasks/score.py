@@ -12,7 +12,7 @@ from foosball_gym import table
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.observations import check_flag
 from foosball_gym.policy_io.task import Layout
-from foosball_gym.tasks.base import Start, Task
+from foosball_gym.tasks.base import GAP_Y, REACH_X, Start, Task, figurine_at_ball
 from foosball_gym.tasks.serves import Shots, check_choice, resting_in_front_of
 
 BALL_STARTS = ("resting", "incoming")
@@ -60,7 +60,12 @@ class ScoreTask(Task):
             velocity = ball_velocity
         slide = [0.0]
         if self.obstacles:
-            slide += self._obstacle_positions(rng, options.get("obstacle_positions"))
+            given = options.get("obstacle_positions")
+            slide += self._obstacle_positions(rng, given)
+            if given is not None:
+                # The game slides a figurine that would start inside the ball; one the user
+                # placed stays where it was put, so the ball may not start against it.
+                self._check_clear(slide[1:], position)
         elif options.get("obstacle_positions") is not None:
             raise ValueError("obstacle_positions needs obstacles=True")
         return Start(slide, [0.0] * len(slide), position, velocity)
@@ -83,6 +88,20 @@ class ScoreTask(Task):
                 f"got {given!r}"
             )
         return values
+
+    @staticmethod
+    def _check_clear(slides: list[float], ball: tuple[float, float]) -> None:
+        for name, slide in zip(OBSTACLES, slides):
+            rod = table.rod(name)
+            k = figurine_at_ball(rod, slide, ball)
+            if k is not None:
+                fig_y = rod.figurine_y(slide)[k]
+                raise ValueError(
+                    f"ball_position {tuple(ball)} lies against a figurine of {name} (at y = "
+                    f"{fig_y:.4f} with obstacle_positions' {slide}); the ball's centre must be "
+                    f"at least {REACH_X:.5f} m from the rod along x or {GAP_Y:.5f} m from each "
+                    "of its figurines along y"
+                )
 
     def scripted_policy(self, names: Sequence[str], precise_state: bool = True) -> ScriptedTeam:
         """The scripted keeper, deflecting incoming balls to the goal (or striking them where

@@ -9,8 +9,10 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table
+from foosball_gym.tasks.base import MAX_BALL_SPEED
 
-SHOT_SPEED_LIMITS = (1e-3, 2 * table.BALL_MAX_SPEED)
+# A shot no faster than the table is built for.
+SHOT_SPEED_LIMITS = (1e-3, MAX_BALL_SPEED)
 # The spec's resting ball: 0.497 m from the centre line, +-5 mm, in front of a keeper.
 REST_X, REST_X_JITTER, REST_Y = 0.497, 0.005, 0.1
 
