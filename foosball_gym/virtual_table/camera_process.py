@@ -14,6 +14,7 @@ from __future__ import annotations
 import collections
 import math
 import multiprocessing
+import signal
 import threading
 import time
 from collections.abc import Sequence
@@ -26,6 +27,11 @@ START_TIMEOUT_S = 60.0
 
 
 def _serve(conn: Connection, rods: tuple[str, ...], width: int, height: int) -> None:
+    # The parent ends this process (it sends None, or its end closes the pipe): a Ctrl-C or
+    # SIGTERM to the whole process group must reach the parent only, which stops the table
+    # and then this.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     from foosball_gym import table
     from foosball_gym.sim import View
 

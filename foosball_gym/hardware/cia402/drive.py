@@ -338,7 +338,8 @@ class Cia402Drive(DriveLink):
     # ------------------------------------------------------------------ stopping
 
     def quick_stop(self) -> None:
-        """Quick stop: the drive brakes on its quick stop ramp and holds the position."""
+        """Quick stop: the drive brakes on its quick stop ramp, then switches its power stage
+        off by itself (0x605A = 2)."""
         with self._lock:
             self.enabled = False
             self._write(CONTROLWORD, CW_QUICK_STOP)
