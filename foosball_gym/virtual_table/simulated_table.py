@@ -52,7 +52,7 @@ from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
 from foosball_gym.policy_io.task import TaskInterface
 from foosball_gym.registration import interface_of, make_task
 from foosball_gym.sim import TableSim, drive_acceleration
-from foosball_gym.virtual_table.camera_process import CameraProcess, FrameBuffer
+from foosball_gym.virtual_table.camera_process import KEPT_FRAMES, CameraProcess, FrameBuffer
 from foosball_gym.virtual_table.drives import SimulatedDrives
 from foosball_gym.virtual_table.viewer_process import ViewerProcess
 
@@ -160,7 +160,9 @@ class SimulatedTable:
             raise ValueError(f"camera_latency_s must be 0 or more, got {camera_latency_s!r}")
         self.camera_latency = float(camera_latency_s)
         self._camera: CameraProcess | None = None
-        self._frames = FrameBuffer()  # lock-step's frames, for their latency
+        # Enough frames for the latency to hold back: with fewer, none would ever be due.
+        kept = KEPT_FRAMES + math.ceil(self.camera_latency / self.sim.control_dt)
+        self._frames = FrameBuffer(kept)  # lock-step's frames, for their latency
         self._viewer: ViewerProcess | None = None
         self._thread: threading.Thread | None = None
         try:
@@ -173,7 +175,7 @@ class SimulatedTable:
             # The drives watch the master's heartbeat on the table's own clock.
             self.drives = SimulatedDrives(config, self.sim, clock=self.clock)
             if self.realtime:
-                self._camera = CameraProcess(task.layout.rods, *camera_size)
+                self._camera = CameraProcess(task.layout.rods, *camera_size, kept=kept)
             if gui:
                 self._viewer = ViewerProcess(task.layout.rods)
                 self._viewer.show(*self.sim.scene())
