@@ -388,7 +388,8 @@ def test_watchdog_quick_stops_the_drives_which_brake_on_their_ramp_then_switch_o
     assert info.value.what == stale
     for drive in table.sim_drives.drives.values():
         assert drive.controlword == CW_QUICK_STOP
-        assert state_name(drive.statusword) == "QUICK STOP ACTIVE"  # braking
+        # Braking, or already halted and switched off (a joint that stood still)
+        assert state_name(drive.statusword) in ("QUICK STOP ACTIVE", "SWITCH ON DISABLED")
     stopped_at, speed_at_stop = (np.array(v) for v in table.sim.joint_states())
     trace = []
     for _ in range(60):
