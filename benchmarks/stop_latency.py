@@ -17,7 +17,7 @@ halted). The keeper table's configuration: watchdog_s 50 ms, heartbeat_timeout_s
   bus), sent SIGKILL, SIGSTOP or SIGTERM (which it handles, as ``foosball play`` does); from
   the signal.
 - silent bus: the drives' frames lost (drives to master), or every frame (both ways); from
-  the cut.
+  the cut. Also in profile position mode (pp), where the loop's own SDO transfer hangs.
 - stop and close: ``stop()`` then leaving the ``with`` block at full swing; from the stop.
 
     python benchmarks/stop_latency.py [--trials 10] [--only NAME]
@@ -43,7 +43,6 @@ import numpy as np
 
 from foosball_gym.hardware import (
     BusConfig,
-    DriveFault,
     JointConfig,
     SafetyError,
     TableConfig,
@@ -64,13 +63,14 @@ _channels = itertools.count()
 Times = list[tuple[float | None, float | None, float | None]]
 
 
-def keeper_config(bus: BusConfig | None = None) -> TableConfig:
+def keeper_config(bus: BusConfig | None = None, mode: str = "csp") -> TableConfig:
     return TableConfig(
         joints=[
             JointConfig("home_keeper", "slide", 1, 100_000.0),
             JointConfig("home_keeper", "spin", 2, 1000.0, direction=-1),
         ],
         bus=bus or BusConfig("virtual", f"stop-latency-{next(_channels)}", 1_000_000),
+        mode=mode,
     )
 
 
@@ -366,7 +366,7 @@ def silent_bus(table: RealTimeTable, both_ways: bool) -> Times:
             swing(drives, 9)
         cut = time.monotonic()
         table.sim_drives.cut_bus(outgoing=True, incoming=both_ways)
-        with contextlib.suppress(DriveFault):
+        with contextlib.suppress(SafetyError):
             swing(drives, 30, read=True)
         with contextlib.suppress(RuntimeError):
             drives.close()
@@ -398,9 +398,9 @@ def summary(name: str, times: Times) -> str:
     )
 
 
-def fresh_table(case: Callable[[RealTimeTable], Times]) -> Callable[[], Times]:
+def fresh_table(case: Callable[[RealTimeTable], Times], mode: str = "csp") -> Callable[[], Times]:
     def run() -> Times:
-        table = RealTimeTable(keeper_config())
+        table = RealTimeTable(keeper_config(mode=mode))
         try:
             return case(table)
         finally:
@@ -419,6 +419,9 @@ CASES: dict[str, Callable[[int], Times]] = {
     "killed master, SIGTERM": lambda k: killed_master(signal.SIGTERM),
     "silent bus, drives to master": lambda k: fresh_table(lambda t: silent_bus(t, False))(),
     "silent bus, both ways": lambda k: fresh_table(lambda t: silent_bus(t, True))(),
+    "silent bus, drives to master, pp": lambda k: fresh_table(
+        lambda t: silent_bus(t, False), mode="pp"
+    )(),
     "stop and close": lambda k: fresh_table(stop_and_close)(),
 }
 

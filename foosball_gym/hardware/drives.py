@@ -317,7 +317,9 @@ class TableDrives:
             self._latch.trip(e)
 
     def feed_state(self, now: float) -> None:
-        """A fresh state estimate (camera, filter) arrived at ``now``."""
+        """News for the state estimate arrived at ``now``: a new camera picture. Not every
+        loop: a loop that only predicts, its camera delivering nothing, runs blind, and the
+        watchdog stops the table ``watchdog_s`` after the last picture."""
         self.watchdog.feed_state(now)
 
     def check(self, now: float) -> None:
