@@ -255,8 +255,10 @@ def test_play_real_stops_a_table_whose_camera_gives_the_same_frame_again(
 
     config = keeper_config()
     # The simulated drives answer a SYNC at their table's next step, up to 1/60 s later: a
-    # slower loop leaves that wait (one period) room on a busy machine.
+    # slower loop leaves that wait (one period) room on a busy machine, and the longest
+    # watchdog a table file may have keeps a late loop from tripping its command side first.
     config.control_hz = 40.0
+    config.watchdog_s = 0.1
     model = CameraModel(*SMALL_CAMERA)
     config.camera["calibration"] = CameraCalibration.from_camera_model(model).to_dict()
     table = realtime_table(config)

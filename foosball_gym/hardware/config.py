@@ -322,8 +322,8 @@ class TableConfig:
         if not 0 < self.heartbeat_timeout_s <= MAX_HEARTBEAT_TIMEOUT_S:
             raise ConfigError(
                 "heartbeat_timeout_s",
-                f"must lie in (0, {MAX_HEARTBEAT_TIMEOUT_S:g}] s, so that a lost drive, or a "
-                f"lost master, is noticed within it; got {self.heartbeat_timeout_s:g}",
+                f"must be above 0 and at most {MAX_HEARTBEAT_TIMEOUT_S:g} s, so that a lost "
+                f"drive, or a lost master, is noticed within it; got {self.heartbeat_timeout_s:g}",
             )
         for name in ("camera", "vision", "estimation"):
             if not isinstance(getattr(self, name), dict):
