@@ -59,6 +59,9 @@ _channels = itertools.count()
 
 
 def keeper_config(bus: BusConfig | None = None, mode: str = "csp") -> TableConfig:
+    """The keeper's two drives, with the most lenient watchdog a table file allows and a
+    2.5 times longer heartbeat time than the shipped table: these tests keep time on a shared
+    machine, and assert the order of what happens, not how soon."""
     return TableConfig(
         joints=[
             JointConfig("home_keeper", "slide", 1, 100_000.0),
@@ -66,6 +69,8 @@ def keeper_config(bus: BusConfig | None = None, mode: str = "csp") -> TableConfi
         ],
         bus=bus or BusConfig("virtual", f"test-table-faults-{next(_channels)}", 1_000_000),
         mode=mode,
+        watchdog_s=0.1,
+        heartbeat_timeout_s=0.25,
     )
 
 
@@ -167,6 +172,20 @@ def swing(drives: TableDrives, steps: int, read: bool = False) -> None:
         time.sleep(DT)
 
 
+def start_swinging(drives: TableDrives) -> None:
+    """Bring the drives up and swing the rods for 9 steps. A machine too busy to keep the
+    watchdog fed before the fault is made tests no fault: then the table is brought up again
+    (which restarts a stopped one), up to three times."""
+    for attempt in range(3):
+        try:
+            drives.bring_up()
+            swing(drives, 9)
+            return
+        except SafetyError:
+            if attempt == 2:
+                raise
+
+
 @pytest.fixture
 def tables_seen(monkeypatch):
     """Each simulated table ``play_sim`` made, as it closed: per drive, its events, its state
@@ -255,10 +274,8 @@ def test_play_real_stops_a_table_whose_camera_gives_the_same_frame_again(
 
     config = keeper_config()
     # The simulated drives answer a SYNC at their table's next step, up to 1/60 s later: a
-    # slower loop leaves that wait (one period) room on a busy machine, and the longest
-    # watchdog a table file may have keeps a late loop from tripping its command side first.
+    # slower loop leaves that wait (one period) room on a busy machine.
     config.control_hz = 40.0
-    config.watchdog_s = 0.1
     model = CameraModel(*SMALL_CAMERA)
     config.camera["calibration"] = CameraCalibration.from_camera_model(model).to_dict()
     table = realtime_table(config)
@@ -304,8 +321,7 @@ def test_a_loop_that_hangs_is_stopped_by_the_guard_and_the_drives_end_switched_o
     hanging."""
     table = realtime_table()
     with TableDrives(table.config) as drives:
-        drives.bring_up()
-        swing(drives, 9)
+        start_swinging(drives)
         hung_at = time.monotonic()
         table.wait_until_off()  # the loop hangs meanwhile
         for drive in table.sim_drives.drives.values():
@@ -403,14 +419,22 @@ def master_elsewhere(realtime_table):
     port = random.randint(20_000, 60_000)
     bus = {"interface": "udp_multicast", "channel": group, "port": port}
     table = realtime_table(keeper_config(), bus)
-    master = subprocess.Popen(
-        [sys.executable, "-c", MASTER, group, str(port)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    # A master held up past its watchdog by a busy machine stops before it plays: that is
+    # no kill to test, and it is started again (the next bring-up resets the drives).
+    for _ in range(3):
+        master = subprocess.Popen(
+            [sys.executable, "-c", MASTER, group, str(port)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        assert master.stdout is not None and master.stderr is not None
+        if master.stdout.readline().strip() == "playing":
+            break
+        master.wait(10)
+    else:
+        pytest.fail(f"the master did not play: {master.stderr.read()}")
     try:
-        assert master.stdout.readline().strip() == "playing", master.stderr.read()
         yield table, master
     finally:
         with contextlib.suppress(ProcessLookupError):
@@ -495,8 +519,7 @@ def test_a_silent_bus_stops_every_drive_at_once_and_leaves_it_switched_off(
     spy = BusSpy(table.config.bus.channel)
     drives = TableDrives(table.config)
     try:
-        drives.bring_up()
-        swing(drives, 9)
+        start_swinging(drives)
         cut_at, first_frame = time.monotonic(), len(spy.frames)
         table.sim_drives.cut_bus(outgoing=True, incoming=silent == "both ways")
         with pytest.raises(SafetyError):  # no answer within a control period, or at all
