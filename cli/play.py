@@ -177,6 +177,7 @@ def _check_human(env_id: str, env_kwargs: dict[str, Any], human: str, rod: str |
 def run(args: argparse.Namespace) -> int:
     try:
         from foosball_gym.play.stack import play_real, play_sim
+        from foosball_gym.play.termination import Terminated, catch_termination
     except ImportError as err:
         raise CliError(
             f'{err}; install the hardware extra: pip install "foosball_gym[hardware]"'
@@ -211,6 +212,8 @@ def run(args: argparse.Namespace) -> int:
     realtime = args.clock == "realtime" or (args.clock is None and not gui)
     if args.clock and args.table != "sim":
         raise CliError(f"--{args.clock} chooses the simulated table's clock: give --table sim")
+    # SIGTERM and SIGHUP stop the table as Ctrl-C does: brake, switch off, then exit.
+    restore_signals = catch_termination()
     try:
         if args.table == "sim":
             report = play_sim(
@@ -245,6 +248,11 @@ def run(args: argparse.Namespace) -> int:
     except SafetyError as err:
         print(f"\nstopped: {err}", file=sys.stderr)
         return 1
+    except Terminated as err:
+        print(f"\nstopped: {err}", file=sys.stderr)
+        return 128 + err.signum
+    finally:
+        restore_signals()
     print()
     if report.episodes:
         print(

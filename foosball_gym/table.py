@@ -275,6 +275,26 @@ def rod(name: str) -> Rod:
         raise ValueError(f"unknown rod {name!r}; allowed: {', '.join(ROD_BY_NAME)}") from None
 
 
+def rod_spin_inertia(rod: Rod) -> float:
+    """The rod's moment of inertia about its axis, figurines included (kg m^2), as the URDF
+    gives it."""
+    fx, _, fz = FIGURINE_SIZE
+    figurine = FIGURINE_MASS * (FIGURINE_CENTRE_BELOW_AXIS**2 + (fx * fx + fz * fz) / 12)
+    return ROD_MASS * ROD_RADIUS**2 / 2 + len(rod.figurine_offsets) * figurine
+
+
+def drive_acceleration(rod: Rod, joint: str) -> float:
+    """The most a drive can change its joint's speed per second, with nothing else pushing
+    (m/s^2 for ``"slide"``, rad/s^2 for ``"spin"``): the simulated drives reach it, and a real
+    table's configuration may not ask for more."""
+    if joint == "slide":
+        moving = CARRIAGE_MASS + ROD_MASS + len(rod.figurine_offsets) * FIGURINE_MASS
+        return SLIDE_MAX_FORCE / moving
+    if joint == "spin":
+        return SPIN_MAX_TORQUE / rod_spin_inertia(rod)
+    raise ValueError(f"joint must be 'slide' or 'spin', got {joint!r}")
+
+
 def within_reach(rod: Rod, x: float, y: float) -> bool:
     """Whether a figurine of ``rod``, slid anywhere along its range, can touch a ball lying at
     (x, y): the table's rules serve again a ball at rest that none can."""

@@ -132,7 +132,7 @@ def test_bring_up_sets_the_drives_to_watch_the_master_and_brake_on_every_stop():
                 joint = drive.joint
                 assert sdo[CONSUMER_HEARTBEAT_TIME][1].raw == (DEFAULT_MASTER_NODE_ID << 16) | 100
                 assert sdo[ABORT_CONNECTION_OPTION_CODE].raw == 3  # quick stop
-                assert sdo[QUICK_STOP_OPTION_CODE].raw == 6  # quick stop ramp, then hold
+                assert sdo[QUICK_STOP_OPTION_CODE].raw == 2  # quick stop ramp, then off
                 assert sdo[SHUTDOWN_OPTION_CODE].raw == 1  # slow down, then switch off
                 assert sdo[DISABLE_OPERATION_OPTION_CODE].raw == 1
                 assert sdo[FAULT_REACTION_OPTION_CODE].raw == 2  # quick stop ramp
@@ -241,7 +241,7 @@ def make_lockstep():
 
 
 @pytest.mark.parametrize("death", ["threads gone", "bus gone"])
-def test_a_killed_master_is_noticed_by_the_drives_which_brake_and_hold_on_their_own(
+def test_a_killed_master_is_noticed_by_the_drives_which_brake_and_switch_off_on_their_own(
     make_lockstep, death
 ):
     table = make_lockstep()
@@ -267,8 +267,11 @@ def test_a_killed_master_is_noticed_by_the_drives_which_brake_and_hold_on_their_
         assert [e.value for e in lost] == [DEFAULT_MASTER_NODE_ID]
         assert killed_at < lost[0].t <= killed_at + timeout + 2 * DT
         assert lost[0].state == QUICK_STOP
-        assert state_name(drive.statusword) == QUICK_STOP
-        assert drive.statusword & SW_TARGET_REACHED  # halted, holding under power
+        # It braked to standstill, then switched its power stage off, by itself.
+        after = [e for e in drive.events if e.t >= lost[0].t and e.what != "sync"]
+        assert [e.what for e in after] == ["master heartbeat lost", "halted", "power off"]
+        assert after[-1].speed == 0.0
+        assert state_name(drive.statusword) == "SWITCH ON DISABLED"
         # No command reached it after the master died; the quick stop was its own.
         assert not [e for e in drive.events if e.t > killed_at and e.what == "controlword"]
     positions = np.array([p for p, _ in trace])

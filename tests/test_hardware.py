@@ -175,15 +175,37 @@ def test_config_save_and_load_round_trip(tmp_path):
         ),
         (lambda d: d["joints"][0].update(direction=0), "joints[0].direction", "1, -1"),
         (lambda d: d["joints"][0].update(limit_margin=0.2), "joints[0].limit_margin", "0.123"),
+        (
+            lambda d: d["joints"][0].update(limit_margin=0),
+            "joints[0].limit_margin",
+            "must lie in (0, 0.123) m",
+        ),
+        (
+            lambda d: d["joints"][0].update(max_acceleration=10_000),
+            "joints[0].max_acceleration",
+            "must lie in (0, 96.55] m/s^2",
+        ),
+        (
+            lambda d: d["joints"][1].update(max_acceleration=1e6),
+            "joints[1].max_acceleration",
+            "must lie in (0, 2.889e+04] rad/s^2",
+        ),
+        (
+            lambda d: d["joints"][1].update(max_acceleration=0),
+            "joints[1].max_acceleration",
+            "must lie in (0, 2.889e+04] rad/s^2",
+        ),
         (lambda d: d["joints"][0].update(max_speed=5.0), "joints[0].max_speed", "limit 4"),
         (lambda d: d["joints"][0].update(speed=1.0), "joints[0].speed", "allowed: rod"),
         (lambda d: d["joints"].append(dict(d["joints"][0], node_id=3)), "joints[2]", "already"),
         (lambda d: d.update(mode="velocity"), "mode", "csp, pp"),
         (lambda d: d["bus"].update(bitrate=1_000_001), "bus.bitrate", "1000000"),
         (lambda d: d["bus"].update(interface="carrier-pigeon"), "bus.interface", "socketcan"),
-        (lambda d: d.update(watchdog_s=-1), "watchdog_s", "positive"),
-        (lambda d: d.update(watchdog_s=10), "watchdog_s", "at most 0.1 s"),
+        (lambda d: d.update(watchdog_s=-1), "watchdog_s", "must lie in 0.01667 to 0.1 s"),
+        (lambda d: d.update(watchdog_s=0.01), "watchdog_s", "at least one control period"),
+        (lambda d: d.update(watchdog_s=10), "watchdog_s", "must lie in 0.01667 to 0.1 s"),
         (lambda d: d.update(heartbeat_timeout_s=60), "heartbeat_timeout_s", "at most 0.5 s"),
+        (lambda d: d.update(heartbeat_timeout_s=0), "heartbeat_timeout_s", "above 0 and at"),
         (lambda d: d.update(control_hz=30), "control_hz", "40 to 1000 Hz"),
         (lambda d: d.update(control_hz=5000), "control_hz", "40 to 1000 Hz"),
         (lambda d: d.update(camera=[1, 2]), "camera", "mapping"),
@@ -201,6 +223,7 @@ def test_config_errors_name_the_field_and_what_is_allowed(tmp_path, change, fiel
         load_config(path)
     assert info.value.field == field
     assert hint in str(info.value) and str(path) in str(info.value)
+    assert "\n" not in str(info.value)
 
 
 # ---------------------------------------------------------------------------- safety, pure
@@ -349,7 +372,9 @@ def test_limits_and_speeds_hold_against_a_policy_of_extremes_and_noise(make_tabl
 
 
 @pytest.mark.parametrize("stale", ["state estimate", "command"])
-def test_watchdog_quick_stops_the_drives_which_brake_on_their_ramp_and_hold(make_table, stale):
+def test_watchdog_quick_stops_the_drives_which_brake_on_their_ramp_then_switch_off(
+    make_table, stale
+):
     table = make_table()
     table.drives.bring_up()
     for _ in range(20):
@@ -363,7 +388,8 @@ def test_watchdog_quick_stops_the_drives_which_brake_on_their_ramp_and_hold(make
     assert info.value.what == stale
     for drive in table.sim_drives.drives.values():
         assert drive.controlword == CW_QUICK_STOP
-        assert state_name(drive.statusword) == "QUICK STOP ACTIVE"
+        # Braking, or already halted and switched off (a joint that stood still)
+        assert state_name(drive.statusword) in ("QUICK STOP ACTIVE", "SWITCH ON DISABLED")
     stopped_at, speed_at_stop = (np.array(v) for v in table.sim.joint_states())
     trace = []
     for _ in range(60):
@@ -371,7 +397,7 @@ def test_watchdog_quick_stops_the_drives_which_brake_on_their_ramp_and_hold(make
         trace.append(table.joints())
     positions, velocities = table.sim.joint_states()
     # Braked on the quick stop ramp (max_acceleration), in the direction it was going, then
-    # held: no further than the ramp's stopping distance plus the joint's lag behind it.
+    # stood still: no further than the ramp's stopping distance plus the joint's lag behind it.
     deceleration = np.array([j.max_acceleration for j in table.config.joints])
     travel = np.array(positions) - stopped_at
     braking = speed_at_stop**2 / (2 * deceleration)
@@ -380,7 +406,11 @@ def test_watchdog_quick_stops_the_drives_which_brake_on_their_ramp_and_hold(make
     np.testing.assert_allclose(trace[-20:], [positions] * 20, atol=1e-4)
     np.testing.assert_allclose(velocities, 0.0, atol=1e-3)
     for drive in table.sim_drives.drives.values():
-        assert drive.statusword & 0x0400  # target reached: halted in QUICK STOP ACTIVE
+        # Halted, then the power went off by the drive's own doing (0x605A = 2), at standstill.
+        after = [e for e in drive.events if e.what in ("halted", "power off")]
+        assert [e.what for e in after] == ["halted", "power off"]
+        assert [e.speed for e in after] == [0.0, 0.0]
+        assert state_name(drive.statusword) == "SWITCH ON DISABLED"
     with pytest.raises(WatchdogTripped):  # stays stopped until brought up again
         table.drives.command({SLIDE: 0.0}, table.now + DT)
 

@@ -69,14 +69,12 @@ class ConfigError(ValueError):
         return ConfigError(f"{prefix}.{self.field}", self.problem, self.source)
 
 
-def _number(name: str, value: Any, *, positive: bool = False, non_negative: bool = False) -> float:
+def _number(name: str, value: Any, *, positive: bool = False) -> float:
     # bool is an int to Python, but "true" for a scale is a mistake in the file.
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ConfigError(name, f"must be a finite number, got {value!r}")
     if positive and value <= 0:
         raise ConfigError(name, f"must be positive, got {value!r}")
-    if non_negative and value < 0:
-        raise ConfigError(name, f"must not be negative, got {value!r}")
     return float(value)
 
 
@@ -137,10 +135,13 @@ class JointConfig:
             per second squared.
         direction: +1 or -1: the sign between the joint's value and the drive's increments.
         offset: the drive's position, in increments, at joint value 0.
-        limit_margin: how far the targets stay inside the table's joint limit (m or rad).
+        limit_margin: how far the targets stay inside the table's joint limit (m or rad), more
+            than 0.
         max_speed: the fastest the targets may move (m/s or rad/s); at most, and by default,
             the table's drive limit.
-        max_acceleration: the fastest the targets' speed may change (m/s^2 or rad/s^2).
+        max_acceleration: the fastest the targets' speed may change (m/s^2 or rad/s^2), and the
+            drives' stop ramps; at most what the drive can reach
+            (:func:`foosball_gym.table.drive_acceleration`).
     """
 
     rod: str
@@ -166,11 +167,14 @@ class JointConfig:
         _integer("offset", self.offset)
         if self.limit_margin is None:
             self.limit_margin = DEFAULT_LIMIT_MARGIN[self.joint]
-        self.limit_margin = _number("limit_margin", self.limit_margin, non_negative=True)
-        if self.limit_margin >= self.hard_limit:
+        unit = "m" if self.joint == "slide" else "rad"
+        self.limit_margin = _number("limit_margin", self.limit_margin)
+        # A margin of 0 lets the targets reach the end stop itself.
+        if not 0 < self.limit_margin < self.hard_limit:
             raise ConfigError(
                 "limit_margin",
-                f"must be less than the {self.joint} limit of {self.rod} ({self.hard_limit:g}), "
+                f"must lie in (0, {self.hard_limit:g}) {unit}: above 0, so that no target reaches "
+                f"the end stop, and below the {self.joint} limit of {self.rod}; "
                 f"got {self.limit_margin:g}",
             )
         top = self.drive_max_speed
@@ -183,7 +187,16 @@ class JointConfig:
             )
         if self.max_acceleration is None:
             self.max_acceleration = DEFAULT_MAX_ACCELERATION[self.joint]
-        self.max_acceleration = _number("max_acceleration", self.max_acceleration, positive=True)
+        self.max_acceleration = _number("max_acceleration", self.max_acceleration)
+        # Beyond what the drive can do, the rate limit and the stop ramps (0x6084, 0x6085) ask
+        # for a braking the drive cannot give: in effect no limit and no ramp.
+        reach = table.drive_acceleration(table.rod(self.rod), self.joint)
+        if not 0 < self.max_acceleration <= reach:
+            raise ConfigError(
+                "max_acceleration",
+                f"must lie in (0, {reach:.4g}] {unit}/s^2, at most what the {self.rod} "
+                f"{self.joint} drive can reach; got {self.max_acceleration:g}",
+            )
         # Every position in the joint's range must fit the drive's int32 objects, and the
         # profile speeds its uint32 ones.
         for end in (-self.hard_limit, self.hard_limit):
@@ -238,7 +251,7 @@ class TableConfig:
     Attributes:
         joints: the joints with a drive, each once.
         bus: the CAN bus.
-        control_hz: control steps per second (the SYNC rate in ``csp``).
+        control_hz: control steps per second (the SYNC rate in ``csp``), 40 to 1000.
         mode: ``"csp"``, cyclic synchronous position: every step the targets go out in
             PDOs and one SYNC makes all drives take them and sample their positions at the same
             instant, a few frames per step (the default: it keeps both joints of a rod in step,
@@ -246,10 +259,12 @@ class TableConfig:
             of bus time). ``"pp"``, profile position over SDO: each drive runs its own profile
             to the target within ``max_speed`` and ``max_acceleration``, which needs no PDO
             set-up but costs a dozen confirmed SDO transfers per step.
-        watchdog_s: the drives stop when the last command or the last state estimate is
-            older than this.
-        heartbeat_timeout_s: a drive whose heartbeat is older than this counts as lost; the
-            drives are told to beat three times as often.
+        watchdog_s: the drives stop when the last command, or the last camera frame that
+            brought news to the state estimate, is older than this; one control period to
+            :data:`MAX_WATCHDOG_S`.
+        heartbeat_timeout_s: a drive whose heartbeat is older than this counts as lost, and a
+            drive that hears nothing of the master for this long stops by itself; the drives
+            are told to beat three times as often. At most :data:`MAX_HEARTBEAT_TIMEOUT_S`.
         camera, vision, estimation: free-form sections for the camera, the detector and the
             Kalman filter.
     """
@@ -284,12 +299,32 @@ class TableConfig:
                 )
             node_ids[joint.node_id] = i
             keys[joint.key] = i
-        self.control_hz = _number("control_hz", self.control_hz, positive=True)
+        self.control_hz = _number("control_hz", self.control_hz)
+        low, high = CONTROL_HZ_RANGE
+        if not low <= self.control_hz <= high:
+            raise ConfigError(
+                "control_hz",
+                f"must lie in {low:g} to {high:g} Hz (the drives take the SYNC period as a "
+                f"count of 0.1 ms up to 255), got {self.control_hz:g}",
+            )
         _choice("mode", self.mode, DRIVE_MODES)
-        self.watchdog_s = _number("watchdog_s", self.watchdog_s, positive=True)
-        self.heartbeat_timeout_s = _number(
-            "heartbeat_timeout_s", self.heartbeat_timeout_s, positive=True
-        )
+        self.watchdog_s = _number("watchdog_s", self.watchdog_s)
+        period = self.control_period
+        if not period <= self.watchdog_s <= MAX_WATCHDOG_S:
+            raise ConfigError(
+                "watchdog_s",
+                f"must lie in {period:.4g} to {MAX_WATCHDOG_S:g} s: at least one control period "
+                f"at {self.control_hz:g} Hz, which a loop on time takes between two commands, "
+                f"and at most {MAX_WATCHDOG_S:g} s, so that a stalled loop stops the rods "
+                f"within it; got {self.watchdog_s:g}",
+            )
+        self.heartbeat_timeout_s = _number("heartbeat_timeout_s", self.heartbeat_timeout_s)
+        if not 0 < self.heartbeat_timeout_s <= MAX_HEARTBEAT_TIMEOUT_S:
+            raise ConfigError(
+                "heartbeat_timeout_s",
+                f"must be above 0 and at most {MAX_HEARTBEAT_TIMEOUT_S:g} s, so that a lost "
+                f"drive, or a lost master, is noticed within it; got {self.heartbeat_timeout_s:g}",
+            )
         for name in ("camera", "vision", "estimation"):
             if not isinstance(getattr(self, name), dict):
                 raise ConfigError(name, f"must be a mapping, got {getattr(self, name)!r}")
@@ -385,34 +420,9 @@ def load_config(path: str | os.PathLike) -> TableConfig:
         raise ConfigError("<file>", f"is not valid YAML: {e}", str(path)) from None
     try:
         config = TableConfig.from_dict(data)
-        _check_real_table(config)
     except ConfigError as e:
         raise ConfigError(e.field, e.problem, str(path)) from None
     return config
-
-
-def _check_real_table(config: TableConfig) -> None:
-    """The limits a real table's drives and safety need, which a simulated table (built in
-    code, with a slower heartbeat for a loaded test machine) does without."""
-    low, high = CONTROL_HZ_RANGE
-    if not low <= config.control_hz <= high:
-        raise ConfigError(
-            "control_hz",
-            f"must lie in {low:g} to {high:g} Hz (the drives take the SYNC period as a "
-            f"count of 0.1 ms up to 255), got {config.control_hz:g}",
-        )
-    if config.watchdog_s > MAX_WATCHDOG_S:
-        raise ConfigError(
-            "watchdog_s",
-            f"must be at most {MAX_WATCHDOG_S} s, so that a stalled loop stops the rods "
-            f"within it, got {config.watchdog_s:g}",
-        )
-    if config.heartbeat_timeout_s > MAX_HEARTBEAT_TIMEOUT_S:
-        raise ConfigError(
-            "heartbeat_timeout_s",
-            f"must be at most {MAX_HEARTBEAT_TIMEOUT_S} s, so that a lost drive is noticed "
-            f"within it, got {config.heartbeat_timeout_s:g}",
-        )
 
 
 def save_config(config: TableConfig, path: str | os.PathLike) -> None:

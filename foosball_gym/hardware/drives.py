@@ -5,30 +5,37 @@
     with TableDrives(load_config(shipped_table("keeper"))) as drives:
         drives.bring_up()
         while playing:
+            frame = camera.read()
             now = time.monotonic()
+            if frame is new:
+                drives.feed_state(now)     # news for the state estimate: a new camera frame
+            ...                            # Kalman filter, policy
             drives.command(targets, now)   # checks faults and the watchdog first
             state = drives.read()          # {(rod, joint): (position, velocity)}
-            ...                            # camera, Kalman filter, policy
-            drives.feed_state(now)         # a fresh state estimate arrived
             drives.check(now)
 
 Leaving the ``with`` block, normally or by any exception (Ctrl-C included), brakes every
-drive to standstill, then disables it, and re-raises. A fault on any drive, or a watchdog that
-trips, quick-stops every drive (it brakes on its ramp and holds) and raises
+drive to standstill, then switches it off, and re-raises. A fault on any drive, or a watchdog
+that trips, quick-stops every drive and raises
 :class:`~foosball_gym.hardware.safety.DriveFault` or
 :class:`~foosball_gym.hardware.safety.WatchdogTripped`; the table stays stopped, and every
-later call raises the same error, until :meth:`TableDrives.bring_up` runs again.
+later call raises the same error, until :meth:`TableDrives.bring_up` runs again. A quick stop
+brakes on the drive's ramp and then switches its power stage off by itself (0x605A = 2, see
+:mod:`~foosball_gym.hardware.cia402.bring_up`), so a stop ends unpowered even when nobody is
+left to switch the drives off. Every drive is stopped at once, each from a thread of its own:
+one that does not answer (a silent bus) delays none of the others.
 
 Two supervisors do not depend on the loop calling in:
 
 - the command guard (:class:`~foosball_gym.hardware.safety.CommandGuard`), a thread that
   quick-stops every drive when no command went out for ``watchdog_s`` on the table's clock,
-  whatever the loop is doing (a policy that blocks, a camera that hangs);
+  whatever the loop is doing (a policy that blocks, a camera read that hangs);
 - the master's heartbeat (:class:`MasterHeartbeat`), sent from a thread of its own and with
   every command; each drive is set up to quick-stop itself when it misses it for
-  ``heartbeat_timeout_s`` (objects 0x1016 and 0x6007, see
-  :mod:`~foosball_gym.hardware.cia402.bring_up`), which covers a master that was killed, whose
-  interpreter is stuck, or that lost the bus.
+  ``heartbeat_timeout_s`` (objects 0x1016 and 0x6007), which covers a master that was killed,
+  stopped (SIGSTOP), whose interpreter is stuck, or that lost the bus. Closing stops the
+  drives' watch of it only on the drives that confirmed they are switched off: one that did
+  not answer keeps watching, and stops itself once the heartbeat ends.
 """
 
 from __future__ import annotations
@@ -43,6 +50,7 @@ import can
 import canopen
 
 from foosball_gym.hardware.cia402 import Cia402Drive
+from foosball_gym.hardware.cia402.protocol import POWERED_STATES
 from foosball_gym.hardware.config import Joint, TableConfig
 from foosball_gym.hardware.safety import (
     CommandGuard,
@@ -240,7 +248,9 @@ class TableDrives:
                 positions[key] = drive.bring_up()
                 self._limiters[key].reset(positions[key])
         except BaseException:
-            self._disable_all(raise_errors=False)
+            _, failures, _ = self._disable_all()
+            if failures:
+                logger.error("after a failed bring-up: %s", "; ".join(failures))
             raise
         self._running = True
         return positions
@@ -307,7 +317,9 @@ class TableDrives:
             self._latch.trip(e)
 
     def feed_state(self, now: float) -> None:
-        """A fresh state estimate (camera, filter) arrived at ``now``."""
+        """News for the state estimate arrived at ``now``: a new camera picture. Not every
+        loop: a loop that only predicts, its camera delivering nothing, runs blind, and the
+        watchdog stops the table ``watchdog_s`` after the last picture."""
         self.watchdog.feed_state(now)
 
     def check(self, now: float) -> None:
@@ -330,7 +342,8 @@ class TableDrives:
                 self._latch.trip(e)
 
     def stop(self) -> None:
-        """Quick-stop every drive (they brake and hold); :meth:`bring_up` starts them again."""
+        """Quick-stop every drive (they brake, then switch off); :meth:`bring_up` starts them
+        again."""
         self._check_open()
         self._quick_stop_all()
 
@@ -339,32 +352,37 @@ class TableDrives:
         self.guard.use_clock(clock)
 
     def close(self) -> None:
-        """Brake every drive to standstill, disable it, send it to NMT pre-operational, stop
+        """Brake every drive to standstill, switch it off, send it to NMT pre-operational, stop
         the master's heartbeat and close the bus.
 
         Every drive is tried, even when one fails or Ctrl-C arrives meanwhile; the failures
-        are raised afterwards. Safe to call twice.
+        are raised afterwards. A drive that did not confirm it is switched off is left
+        watching the master's heartbeat, which ends here: it stops itself. Safe to call twice.
         """
         if self._closed:
             return
         self._closed = True
         self.guard.stop()
-        interrupt = None
-        try:
-            self._disable_all(raise_errors=True)
-        except KeyboardInterrupt as e:
-            interrupt = e
-        finally:
-            for drive in self.drives.values():
-                try:
-                    drive.release()
-                except Exception as e:  # every drive is tried, and the bus may be gone
-                    logger.warning("%s: %s", drive.joint.label, e)
-            # The drives stopped watching it in release().
-            self.heartbeat.stop()
-            self._disconnect()
+        off, failures, interrupt = self._disable_all()
+        for key, drive in self.drives.items():
+            if key not in off:
+                logger.warning(
+                    "%s: not confirmed switched off; it keeps watching the master's heartbeat, "
+                    "and stops itself when that ends",
+                    drive.joint.label,
+                )
+                continue
+            try:
+                drive.release()
+            except Exception as e:  # every drive is tried, and the bus may be gone
+                logger.warning("%s: %s", drive.joint.label, e)
+        # The drives that are off stopped watching it in release().
+        self.heartbeat.stop()
+        self._disconnect()
         if interrupt is not None:
             raise interrupt
+        if failures:
+            raise RuntimeError("stopping the drives failed: " + "; ".join(failures))
 
     # ------------------------------------------------------------------ internals
 
@@ -372,15 +390,18 @@ class TableDrives:
         if self._closed:
             raise RuntimeError("the table's drives are closed")
 
-    def _quick_stop_all(self, last: int | None = None) -> None:
-        """Quick-stop every drive, node ``last`` after the others."""
+    def _quick_stop_all(self) -> None:
+        """Quick-stop every drive at once; raise afterwards if one did not confirm it."""
         self._running = False
         self.guard.disarm()
-        self._for_every_drive(Cia402Drive.quick_stop, "quick stop", raise_errors=True, last=last)
+        failures, interrupt = self._for_every_drive(Cia402Drive.quick_stop)
+        if interrupt is not None:
+            raise interrupt
+        if failures:
+            raise RuntimeError("quick stop failed: " + "; ".join(failures))
 
     def _stop_for(self, error: SafetyError) -> None:
-        # A faulty drive may not answer, and waiting for it must not delay stopping the rest.
-        self._quick_stop_all(last=getattr(error, "node_id", None))
+        self._quick_stop_all()
 
     def _on_silence(self, age: float) -> None:
         """The guard's thread: no command for longer than the watchdog allows."""
@@ -393,39 +414,59 @@ class TableDrives:
         except SafetyError:
             pass  # the play loop raises it at its next call
 
-    def _disable_all(self, *, raise_errors: bool) -> None:
-        """Quick-stop every drive at once, then disable each as it reports standstill: they
-        all brake together, so the wait is that of the slowest."""
+    def _disable_all(self) -> tuple[set[Joint], list[str], KeyboardInterrupt | None]:
+        """Quick-stop every drive at once, then switch each off as it reports standstill: they
+        all brake together, so the wait is that of the slowest.
+
+        Returns:
+            The joints whose drive reported its power stage off, what failed, and a Ctrl-C
+            that came meanwhile (every drive was tried all the same).
+        """
         self._running = False
         self.guard.disarm()
-        self._for_every_drive(Cia402Drive.quick_stop, "quick stop", raise_errors=False)
-        self._for_every_drive(Cia402Drive.disable, "disable", raise_errors=raise_errors)
+        failures, interrupt = self._for_every_drive(Cia402Drive.quick_stop)
+        states: dict[Joint, str] = {}
+
+        def disable(drive: Cia402Drive) -> None:
+            states[drive.joint.key] = drive.disable()
+
+        more, second = self._for_every_drive(disable)
+        off = {key for key, state in states.items() if state not in POWERED_STATES}
+        return off, failures + more, interrupt or second
 
     def _for_every_drive(
-        self,
-        action: Callable[[Cia402Drive], object],
-        what: str,
-        *,
-        raise_errors: bool,
-        last: int | None = None,
-    ) -> None:
-        """Run ``action`` on every drive (node ``last`` last), whatever happens to one."""
-        failures = []
-        interrupt = None
-        for drive in sorted(self.drives.values(), key=lambda d: d.joint.node_id == last):
+        self, action: Callable[[Cia402Drive], object]
+    ) -> tuple[list[str], KeyboardInterrupt | None]:
+        """Run ``action`` on every drive at once, each in a thread of its own, and wait for all.
+
+        A drive that does not answer waits out its SDO timeout in its own thread, never
+        delaying the others; a Ctrl-C meanwhile does not leave one untried.
+
+        Returns:
+            What failed, one line per drive, and the Ctrl-C that came meanwhile, if one did.
+        """
+        failures: list[str] = []
+
+        def run(drive: Cia402Drive) -> None:
             try:
                 action(drive)
-            except KeyboardInterrupt as e:
-                interrupt = e  # a second Ctrl-C must not leave the other drives running
             except Exception as e:
                 failures.append(str(e))
-        if interrupt is not None:
-            raise interrupt
-        if failures:
-            message = f"{what} failed: " + "; ".join(failures)
-            if raise_errors:
-                raise RuntimeError(message)
-            logger.error("%s", message)
+
+        threads = [
+            threading.Thread(target=run, args=(drive,), name=f"drive-{key[0]}-{key[1]}")
+            for key, drive in self.drives.items()
+        ]
+        for thread in threads:
+            thread.start()
+        interrupt = None
+        for thread in threads:
+            while thread.is_alive():
+                try:
+                    thread.join()
+                except KeyboardInterrupt as e:
+                    interrupt = e  # a second Ctrl-C must not leave the other drives running
+        return failures, interrupt
 
     def _disconnect(self) -> None:
         if self._own_network and self.network.bus is not None:

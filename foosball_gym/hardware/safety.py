@@ -7,10 +7,11 @@ the tests drive it with made-up timestamps.
   joint limits minus a margin, never move faster than the joint's top speed and change speed no
   faster than its acceleration allows, one control period at a time.
 - :class:`Watchdog` trips when the last command or the last state estimate is too old; the
-  play loop's own calls check it.
+  play loop's own calls check it, and feed the state estimate's side with new camera
+  pictures only.
 - :class:`CommandGuard` checks the age of the last command from a thread of its own, so a
-  loop that hangs (a policy that blocks, a stuck camera) stops the table within the watchdog
-  period instead of at its next call.
+  loop that hangs (a policy that blocks, a stuck camera read) stops the table within the
+  watchdog period instead of at its next call.
 - :class:`SafetyLatch` stops every drive once, on the first error from whichever thread, and
   keeps raising that error until the drives are brought up again.
 """

@@ -59,7 +59,9 @@ class PlayLoop:
         interface: the task's observation builder and action mapping.
         drives: the table's drives (``TableDrives``), already brought up.
         source: the camera (``read() -> (t, frame) | None``, None at its end); a frame of
-            None is one taken at ``t`` that came too late to use, a missed detection.
+            None is one taken at ``t`` that came too late to use, a missed detection. Only a
+            picture newer than the last feeds the drives' state watchdog: a camera that stops
+            delivering them stops the table within ``watchdog_s`` and one control period.
         detector: the ball detector (``detect(frame) -> Detection | None``).
         calibration: pixel → table-plane back-projection (``pixel_to_table``).
         estimator: the Kalman filters (``update``, ``observation``).
@@ -104,6 +106,10 @@ class PlayLoop:
         self._state: Mapping[Joint, tuple[float, float]] = {}
         self._new_ball = False
         self._last_frame_time: float | None = None
+        # The time of the last frame that came with a picture: what the state estimate is as
+        # fresh as.
+        self._last_seen: float | None = None
+        self._first_frame_early_by = 0.0
 
     def start(self, state: Mapping[Joint, tuple[float, float]] | None = None) -> None:
         """Take the drives' state to begin from (``bring_up`` gives positions only)."""
@@ -119,11 +125,20 @@ class PlayLoop:
                 pos[slot], vel[slot] = p, v
         return pos, vel
 
-    def new_ball(self) -> None:
+    def new_ball(self, first_frame_early_by: float = 0.0) -> None:
         """A new ball is in play somewhere else (the simulated table served one): the next
-        frame starts the ball's estimate afresh, as an environment's reset does."""
+        frame starts the ball's estimate afresh, as an environment's reset does.
+
+        Args:
+            first_frame_early_by: how much sooner than the camera's latency the first frame of
+                the new ball comes (s): the simulated table shows it at once, as an
+                environment's reset does, and the next one only after the latency. The state
+                watchdog counts that first frame as come when it would have, so the wait for
+                the second is no silence of the camera.
+        """
         self.estimator.new_ball()
         self._new_ball = True
+        self._first_frame_early_by = max(0.0, float(first_frame_early_by))
 
     def decide(self) -> LoopRecord:
         """Everything before the targets go out: camera to action."""
@@ -134,6 +149,13 @@ class PlayLoop:
             raise EOFError("the camera has no more frames")
         frame_time, frame = got
         times["frame"] = time.perf_counter()
+        if frame is not None and (self._last_seen is None or frame_time > self._last_seen):
+            # Only a new picture is news for the state estimate: a camera that delivers none
+            # (frozen, or read() giving the last frame again) trips the watchdog, however
+            # busily the loop goes on predicting.
+            self._last_seen = frame_time
+            self.drives.feed_state(self.clock() + self._first_frame_early_by)
+            self._first_frame_early_by = 0.0
         detection = self.detector.detect(frame) if frame is not None else None
         pixel, ball = None, None
         if detection is not None:
@@ -187,9 +209,7 @@ class PlayLoop:
         """The drives' state after the step; the watchdog and fault checks."""
         start = time.perf_counter()
         self._state = self.drives.read()
-        now = self.clock()
-        self.drives.feed_state(now)
-        self.drives.check(now)
+        self.drives.check(self.clock())
         record.stage_ms["read"] = 1e3 * (time.perf_counter() - start)
         if self.on_record is not None:
             self.on_record(record)

@@ -28,7 +28,8 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 
-from foosball_gym import table
+# Re-exported: the simulator's drives are the table's (foosball_gym.table computes the limit).
+from foosball_gym.table import drive_acceleration as drive_acceleration
 
 CONTROL_MODES = ("position", "velocity", "torque")
 # Bullet moves a joint that is this far beyond its end stop back without its penetration
@@ -202,26 +203,3 @@ class RodDrives:
             asked = top
         reachable = now + accel * dt
         return min(top, 1.2 * max(now, min(asked, reachable)) + 0.02 * top)
-
-
-def _rod_spin_inertia(rod: table.Rod) -> float:
-    """The rod's moment of inertia about its axis, figurines included (kg m^2), as the URDF
-    gives it."""
-    fx, _, fz = table.FIGURINE_SIZE
-    figurine = table.FIGURINE_MASS * (
-        table.FIGURINE_CENTRE_BELOW_AXIS**2 + (fx * fx + fz * fz) / 12
-    )
-    return table.ROD_MASS * table.ROD_RADIUS**2 / 2 + len(rod.figurine_offsets) * figurine
-
-
-def drive_acceleration(rod: table.Rod, joint: str) -> float:
-    """The most a drive can change its joint's speed per second, with nothing else pushing
-    (m/s^2 for ``"slide"``, rad/s^2 for ``"spin"``)."""
-    if joint == "slide":
-        moving = (
-            table.CARRIAGE_MASS + table.ROD_MASS + len(rod.figurine_offsets) * table.FIGURINE_MASS
-        )
-        return table.SLIDE_MAX_FORCE / moving
-    if joint == "spin":
-        return table.SPIN_MAX_TORQUE / _rod_spin_inertia(rod)
-    raise ValueError(f"joint must be 'slide' or 'spin', got {joint!r}")

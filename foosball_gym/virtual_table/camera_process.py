@@ -14,6 +14,7 @@ from __future__ import annotations
 import collections
 import math
 import multiprocessing
+import signal
 import threading
 import time
 from collections.abc import Sequence
@@ -26,6 +27,11 @@ START_TIMEOUT_S = 60.0
 
 
 def _serve(conn: Connection, rods: tuple[str, ...], width: int, height: int) -> None:
+    # The parent ends this process (it sends None, or its end closes the pipe): a Ctrl-C or
+    # SIGTERM to the whole process group must reach the parent only, which stops the table
+    # and then this.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     from foosball_gym import table
     from foosball_gym.sim import View
 
@@ -50,7 +56,7 @@ def _serve(conn: Connection, rods: tuple[str, ...], width: int, height: int) -> 
 
 Stamp = tuple[int, float]
 Frame = tuple[Stamp, np.ndarray]
-# Frames kept for a camera's latency: a few control periods' worth.
+# Frames kept beyond those a camera's latency holds back: a few control periods' worth.
 KEPT_FRAMES = 8
 
 
@@ -62,8 +68,8 @@ class FrameBuffer:
     it says so with ``(stamp, None)``, the stamp of the last frame given.
     """
 
-    def __init__(self) -> None:
-        self.frames: collections.deque[Frame] = collections.deque(maxlen=KEPT_FRAMES)
+    def __init__(self, kept: int = KEPT_FRAMES) -> None:
+        self.frames: collections.deque[Frame] = collections.deque(maxlen=kept)
         self.given: Stamp | None = None
 
     def add(self, frame: Frame) -> None:
@@ -102,7 +108,9 @@ class CameraProcess:
     just before a serve is told from one taken just after it at the same time.
     """
 
-    def __init__(self, rods: Sequence[str], width: int, height: int) -> None:
+    def __init__(
+        self, rods: Sequence[str], width: int, height: int, kept: int = KEPT_FRAMES
+    ) -> None:
         # Spawned, not forked: a forked child would share the parent's PyBullet client.
         context = multiprocessing.get_context("spawn")
         self._conn, child = context.Pipe()
@@ -116,7 +124,7 @@ class CameraProcess:
             raise RuntimeError(f"the camera process did not start within {START_TIMEOUT_S} s")
         self._lock = threading.Lock()
         self._requested: collections.deque[Stamp] = collections.deque()
-        self._buffer = FrameBuffer()
+        self._buffer = FrameBuffer(kept)
 
     @property
     def given(self) -> Stamp | None:

@@ -23,8 +23,9 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
+import can
 import canopen
 
 from foosball_gym.hardware.config import Joint, TableConfig
@@ -53,6 +54,9 @@ class SimulatedDrives:
             then spins); by default the order of ``sim.rods``.
         channel: the virtual channel; by default ``config.bus.channel``, for a config whose
             ``bus.interface`` is ``virtual``.
+        bus_options: python-can's arguments for another bus than the virtual one
+            (``interface``, ``channel``, ``port``, ...), one that a master in another process
+            can reach (``udp_multicast``): a master that dies leaves these drives running.
         clock: the table's clock (s) the drives supervise the master's heartbeat on and stamp
             their events with: the wall clock for a table that runs in real time, the simulated
             time in lock-step.
@@ -73,8 +77,9 @@ class SimulatedDrives:
         channel: str | int | None = None,
         *,
         clock: Callable[[], float] = time.monotonic,
+        bus_options: Mapping[str, Any] | None = None,
     ) -> None:
-        if channel is None:
+        if channel is None and bus_options is None:
             if config.bus.interface != "virtual":
                 raise ValueError(
                     "simulated drives are on python-can's virtual bus: pass channel=, or use "
@@ -103,8 +108,12 @@ class SimulatedDrives:
         self._flush_seq = 0
         self.network = canopen.Network()
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
-        # The nodes hear their own frames too: that is how the flush marker comes back.
-        self.network.connect(interface="virtual", channel=channel, receive_own_messages=True)
+        self._muted = self._deaf = False
+        if bus_options is None:
+            # The nodes hear their own frames too: that is how the flush marker comes back.
+            bus_options = {"interface": "virtual", "channel": channel, "receive_own_messages": True}
+        self.network.connect(**bus_options)
+        self._cut_into_the_bus()
         self.drives: dict[int, SimulatedDrive] = {}
         try:
             for joint in config.joints:
@@ -182,6 +191,32 @@ class SimulatedDrives:
     def stop_heartbeat(self, node_id: int) -> None:
         """Silence a node's heartbeat, as a drive that lost power or its bus would."""
         self.drive(node_id).node.nmt.stop_heartbeat()
+
+    def cut_bus(self, *, outgoing: bool = True, incoming: bool = False) -> None:
+        """Lose every frame the drives send (``outgoing``: SDO answers, PDOs, heartbeats,
+        EMCY), or every frame sent to them (``incoming``), or both, from now on: a broken
+        wire or transceiver. The drives themselves go on, and still step their joints."""
+        self._muted, self._deaf = outgoing, incoming
+
+    def _cut_into_the_bus(self) -> None:
+        """Route the nodes' frames through :meth:`cut_bus`'s switches (the flush marker, the
+        simulation's own, always passes)."""
+        bus, network = self.network.bus, self.network
+        assert bus is not None  # connected above
+        send, notify = bus.send, network.notify
+
+        def guarded_send(msg: can.Message, timeout: float | None = None) -> None:
+            if not self._muted or msg.arbitration_id == FLUSH_ID:
+                send(msg, timeout)
+
+        def guarded_notify(can_id: int, data: bytearray, timestamp: float) -> None:
+            if not self._deaf or can_id == FLUSH_ID:
+                notify(can_id, data, timestamp)
+
+        # Instance attributes: the heartbeats' periodic sender and the receive thread's
+        # listener look them up on these objects.
+        bus.send = guarded_send  # type: ignore[method-assign]
+        network.notify = guarded_notify  # type: ignore[method-assign]
 
     def close(self) -> None:
         """Stop the nodes and close their bus; safe to call twice."""

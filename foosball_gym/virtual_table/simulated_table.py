@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import collections
 import itertools
+import logging
 import math
 import os
 import threading
@@ -40,12 +41,18 @@ import numpy as np
 from foosball_gym import table
 from foosball_gym.camera import CameraModel, CameraNoise
 from foosball_gym.game import Game
-from foosball_gym.hardware.config import BusConfig, JointConfig, TableConfig
+from foosball_gym.hardware.config import (
+    MAX_HEARTBEAT_TIMEOUT_S,
+    MAX_WATCHDOG_S,
+    BusConfig,
+    JointConfig,
+    TableConfig,
+)
 from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
 from foosball_gym.policy_io.task import TaskInterface
 from foosball_gym.registration import interface_of, make_task
 from foosball_gym.sim import TableSim, drive_acceleration
-from foosball_gym.virtual_table.camera_process import CameraProcess, FrameBuffer
+from foosball_gym.virtual_table.camera_process import KEPT_FRAMES, CameraProcess, FrameBuffer
 from foosball_gym.virtual_table.drives import SimulatedDrives
 from foosball_gym.virtual_table.viewer_process import ViewerProcess
 
@@ -53,11 +60,11 @@ from foosball_gym.virtual_table.viewer_process import ViewerProcess
 # round, so that a sign error anywhere between policy and rod shows.
 SLIDE_INCREMENTS_PER_M = 90_000.0
 SPIN_INCREMENTS_PER_RAD = 3600 / (2 * np.pi)
-SIM_HEARTBEAT_TIMEOUT_S = 1.0
 # The share of a control period a real-time loop waits for a frame still being rendered (a
 # 320 x 180 frame takes 3 ms for one rod, 5 ms for all eight): the rest is the loop's.
 FRAME_PATIENCE = 0.6
 _channels = itertools.count()
+logger = logging.getLogger(__name__)
 
 
 def virtual_table_config(interface: TaskInterface, mode: str = "csp") -> TableConfig:
@@ -86,13 +93,18 @@ def virtual_table_config(interface: TaskInterface, mode: str = "csp") -> TableCo
             node += 1
     channel = f"foosball-sim-{os.getpid()}-{next(_channels)}"
     # The simulated drives beat their heartbeats from threads of this very process, which
-    # rendering the camera's frames can hold up for tens of milliseconds on a busy machine.
+    # rendering the camera's frames can hold up for tens of milliseconds on a busy machine:
+    # the longest heartbeat time a table file may have (0.5 s), not a real table's 0.1 s.
+    # Likewise the watchdog: the camera is a renderer that shares the machine, and drops a
+    # frame whenever a render overruns the control period (a frame is news for the state
+    # estimate; see PlayLoop), so the longest a table file may have (0.1 s), not 50 ms.
     return TableConfig(
         joints=joints,
         bus=BusConfig(interface="virtual", channel=channel),
         control_hz=float(table.CONTROL_HZ),
         mode=mode,
-        heartbeat_timeout_s=SIM_HEARTBEAT_TIMEOUT_S,
+        watchdog_s=MAX_WATCHDOG_S,
+        heartbeat_timeout_s=MAX_HEARTBEAT_TIMEOUT_S,
     )
 
 
@@ -148,7 +160,9 @@ class SimulatedTable:
             raise ValueError(f"camera_latency_s must be 0 or more, got {camera_latency_s!r}")
         self.camera_latency = float(camera_latency_s)
         self._camera: CameraProcess | None = None
-        self._frames = FrameBuffer()  # lock-step's frames, for their latency
+        # Enough frames for the latency to hold back: with fewer, none would ever be due.
+        kept = KEPT_FRAMES + math.ceil(self.camera_latency / self.sim.control_dt)
+        self._frames = FrameBuffer(kept)  # lock-step's frames, for their latency
         self._viewer: ViewerProcess | None = None
         self._thread: threading.Thread | None = None
         try:
@@ -161,7 +175,7 @@ class SimulatedTable:
             # The drives watch the master's heartbeat on the table's own clock.
             self.drives = SimulatedDrives(config, self.sim, clock=self.clock)
             if self.realtime:
-                self._camera = CameraProcess(task.layout.rods, *camera_size)
+                self._camera = CameraProcess(task.layout.rods, *camera_size, kept=kept)
             if gui:
                 self._viewer = ViewerProcess(task.layout.rods)
                 self._viewer.show(*self.sim.scene())
@@ -204,6 +218,18 @@ class SimulatedTable:
         self._thread = threading.Thread(target=self._run, name="simulated-table", daemon=True)
         self._thread.start()
 
+    def run_on(self) -> None:
+        """Let the table move on by itself at the control rate of the wall clock, as a real
+        one does whatever its master does: a lock-step table, whose loop has ended, keeps
+        stepping while the master switches the drives off, so that they brake on their ramps
+        (which run in the table's steps) instead of being cut off mid-motion. Nothing more is
+        served or scored."""
+        if self._thread is not None:
+            return
+        self._t0 = time.monotonic() - self.time
+        self._thread = threading.Thread(target=self._run, name="simulated-table", daemon=True)
+        self._thread.start()
+
     def _run(self) -> None:
         dt = self.sim.control_dt
         next_tick = self._t0 + self.time + dt
@@ -214,12 +240,17 @@ class SimulatedTable:
             with self._lock:
                 if not self._waiting:
                     self.late_steps += 1
-                self._events.append(self._tick())
+                try:
+                    self._events.append(self._tick())
+                except Exception:
+                    # The loop's next step reports the stopped clock.
+                    logger.exception("the simulated table stopped")
+                    return
                 self._waiting = False
                 self._ticked.notify_all()
                 stamp, scene = (self._serves, self.time), self.sim.scene()
-            assert self._camera is not None
-            self._camera.request(stamp, *scene)
+            if self._camera is not None:
+                self._camera.request(stamp, *scene)
             next_tick += dt
             # After a stall (a debugger, a suspended process) time is not made up in a burst.
             if time.monotonic() > next_tick + dt:
@@ -387,8 +418,10 @@ class SimulatedTable:
         """The true ball x, y, vx, vy now, or at the table time ``at`` of a recent step."""
         if at is None:
             return self.game.ball
+        with self._lock:  # the real-time clock's thread appends meanwhile
+            balls = list(self._balls)
         # Newest first: a serve leaves two entries at one time, and the new ball is the truth.
-        return min(reversed(self._balls), key=lambda tb: abs(tb[0] - at))[1]
+        return min(reversed(balls), key=lambda tb: abs(tb[0] - at))[1]
 
     def close(self) -> None:
         """Stop the clock, the camera and the drives; safe to call twice."""

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
+import signal
 import threading
 from collections.abc import Sequence
 from multiprocessing.connection import Connection
@@ -33,6 +34,11 @@ class WindowError(RuntimeError):
 
 
 def _serve(conn: Connection, rods: tuple[str, ...]) -> None:
+    # The parent ends this process (it sends None, or its end closes the pipe): a Ctrl-C or
+    # SIGTERM to the whole process group must reach the parent only, which stops the table
+    # and then this.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     # The window gives way to the table, the camera and the loop, which keep the wall clock.
     with contextlib.suppress(OSError, AttributeError):
         os.nice(NICENESS)

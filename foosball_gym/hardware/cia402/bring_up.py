@@ -8,8 +8,10 @@ The heartbeats, stop reactions and ramps (CiA 301 / CiA 402):
   The master beats from a thread of its own (``TableDrives``); a master that is killed, hangs
   with the interpreter stuck, or loses the bus stops beating, and the drive notices by itself.
 - 0x6007 abort connection option code = 3: a lost master heartbeat means a quick stop.
-- 0x605A quick stop option code = 6: brake on the quick stop ramp (0x6085), then stay in QUICK
-  STOP ACTIVE holding the position under power; a stopped rod neither coasts nor swings.
+- 0x605A quick stop option code = 2: brake on the quick stop ramp (0x6085), then switch the
+  power stage off (SWITCH ON DISABLED). Every quick stop ends unpowered at standstill, whoever
+  asked for it: the master, its command guard, or the drive itself on a lost heartbeat, when
+  no master is left to switch it off. A rod is never left coasting, nor powered.
 - 0x605B shutdown option code = 1 and 0x605C disable operation option code = 1: a shutdown or
   disable-operation command from any tool brakes on the slow-down ramp (0x6084) before the
   power stage goes off, instead of letting the rod coast.
@@ -39,9 +41,9 @@ from foosball_gym.hardware.cia402.protocol import (
     PROFILE_ACCELERATION,
     PROFILE_DECELERATION,
     PROFILE_VELOCITY,
-    QUICK_STOP_AND_HOLD,
     QUICK_STOP_DECELERATION,
     QUICK_STOP_OPTION_CODE,
+    QUICK_STOP_THEN_SWITCH_OFF,
     SHUTDOWN_OPTION_CODE,
     SLOW_DOWN_THEN_DISABLE,
     STATUSWORD,
@@ -74,7 +76,7 @@ def stop_settings(
     acceleration = abs(joint.speed_to_increments(joint.max_acceleration))
     return [
         *writes,
-        (QUICK_STOP_OPTION_CODE, None, QUICK_STOP_AND_HOLD),
+        (QUICK_STOP_OPTION_CODE, None, QUICK_STOP_THEN_SWITCH_OFF),
         (SHUTDOWN_OPTION_CODE, None, SLOW_DOWN_THEN_DISABLE),
         (DISABLE_OPERATION_OPTION_CODE, None, SLOW_DOWN_THEN_DISABLE),
         (FAULT_REACTION_OPTION_CODE, None, FAULT_REACTION_QUICK_STOP),

@@ -67,8 +67,6 @@ from foosball_gym.hardware.safety import DriveFault
 
 logger = logging.getLogger(__name__)
 
-# A drive turning slower than this fraction of its joint's top speed counts as standing still.
-STANDSTILL_FRACTION = 0.001
 # The wait for standstill ends at this multiple of the ramp's length plus STOP_SLACK_S, whatever
 # the drive reports.
 STOP_TIME_FACTOR = 1.5
@@ -338,10 +336,24 @@ class Cia402Drive(DriveLink):
     # ------------------------------------------------------------------ stopping
 
     def quick_stop(self) -> None:
-        """Quick stop: the drive brakes on its quick stop ramp and holds the position."""
-        with self._lock:
+        """Quick stop: the drive brakes on its quick stop ramp, then switches its power stage
+        off by itself (0x605A = 2).
+
+        A transfer of another thread's may hold the drive: one whose answer a silent bus lost
+        waits out the SDO timeout (0.3 s). After one control period of waiting for it, the
+        stop goes out at once as a bare SDO request (no answer awaited; an enable command
+        that follows cannot take the drive out of the stop), and is sent again, confirmed,
+        once the transfer has given up.
+        """
+        if not self._lock.acquire(timeout=1.0 / self.control_hz):
+            self.enabled = False
+            self._send_unconfirmed(CONTROLWORD, CW_QUICK_STOP)
+            self._lock.acquire()
+        try:
             self.enabled = False
             self._write(CONTROLWORD, CW_QUICK_STOP)
+        finally:
+            self._lock.release()
 
     @property
     def stop_time_s(self) -> float:
@@ -354,25 +366,23 @@ class Cia402Drive(DriveLink):
     def wait_until_stopped(self) -> bool:
         """Wait until a quick-stopped drive reports standstill.
 
-        Standstill: QUICK STOP ACTIVE with the statusword's target-reached bit (the drive has
-        halted) or an actual velocity near 0. A drive that left QUICK STOP ACTIVE by itself (a
-        fault, or an option code that switches off after the ramp) is not waited for. The wait
-        is bounded by :data:`STOP_TIME_FACTOR` times :attr:`stop_time_s` plus
+        Standstill: the drive left QUICK STOP ACTIVE by itself (it switches off once it has
+        halted, 0x605A = 2; or a fault), or shows the statusword's target-reached bit there
+        (halted, with an option code that holds). A velocity that reads near 0 is not taken
+        for it: the drive's ramp may still run, and cutting the power then would let the rod
+        coast. The wait is bounded by :data:`STOP_TIME_FACTOR` times :attr:`stop_time_s` plus
         :data:`STOP_SLACK_S`.
 
         Returns:
             True if the drive reported standstill, False if the bound passed first.
         """
-        joint = self.joint
-        assert joint.max_speed is not None  # JointConfig fills in its default
-        slow = STANDSTILL_FRACTION * abs(joint.speed_to_increments(joint.max_speed))
         deadline = time.monotonic() + STOP_TIME_FACTOR * self.stop_time_s + STOP_SLACK_S
         while True:
             with self._lock:
                 statusword = self._read_statusword()
                 if state_name(statusword) != "QUICK STOP ACTIVE":
                     return True
-                if statusword & SW_TARGET_REACHED or abs(self._read(VELOCITY_ACTUAL)) <= slow:
+                if statusword & SW_TARGET_REACHED:
                     return True
             if time.monotonic() > deadline:
                 return False

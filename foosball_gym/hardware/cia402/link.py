@@ -18,6 +18,7 @@ import can
 import canopen
 from canopen.emcy import EmcyError
 from canopen.nmt import NmtError
+from canopen.sdo.constants import EXPEDITED, REQUEST_DOWNLOAD, SIZE_SPECIFIED
 from canopen.sdo.exceptions import SdoError
 
 from foosball_gym.hardware.cia402.object_dictionary import object_dictionary
@@ -108,6 +109,14 @@ class DriveLink:
         with self._lock, self._talking(f"writing 0x{index:04X} = {value}"):
             obj = self.node.sdo[index]
             (obj if subindex is None else obj[subindex]).raw = value
+
+    def _send_unconfirmed(self, index: int, value: int) -> None:
+        """An expedited SDO download of a 16-bit ``value`` to ``index``:0, sent past the SDO
+        client (and its one transfer at a time) without waiting for the answer."""
+        command = REQUEST_DOWNLOAD | EXPEDITED | SIZE_SPECIFIED | (2 << 2)  # 2 unused bytes
+        request = struct.pack("<BHBH2x", command, index, 0, value)
+        with self._talking(f"sending 0x{index:04X} = {value}"):
+            self.network.send_message(self.node.sdo.rx_cobid, request)
 
     def _read_statusword(self) -> int:
         statusword = self._read(STATUSWORD)

@@ -50,9 +50,10 @@ SW_SET_POINT_ACKNOWLEDGE = 0x1000  # pp
 
 MODE_CODES = {"pp": 1, "csp": 8}
 DEVICE_PROFILE = 402
-# 0x605A = 6: slow down on the quick stop ramp, then stay in QUICK STOP ACTIVE, holding the
-# position under power (a stopped rod holds still rather than being free to swing).
-QUICK_STOP_AND_HOLD = 6
+# 0x605A = 2: slow down on the quick stop ramp, then switch the power stage off (SWITCH ON
+# DISABLED). A drive that stopped itself, its master gone or hung, ends unpowered, not
+# holding under power with nobody left to switch it off.
+QUICK_STOP_THEN_SWITCH_OFF = 2
 # 0x605B, 0x605C = 1: slow down on the slow-down ramp, then switch the power stage off.
 SLOW_DOWN_THEN_DISABLE = 1
 # 0x605E = 2: the fault reaction brakes on the quick stop ramp.
@@ -61,6 +62,8 @@ FAULT_REACTION_QUICK_STOP = 2
 ABORT_CONNECTION_QUICK_STOP = 3
 
 OPERATION_ENABLED = "OPERATION ENABLED"
+# The states in which the power stage drives the motor.
+POWERED_STATES = (OPERATION_ENABLED, "QUICK STOP ACTIVE", "FAULT REACTION ACTIVE")
 NMT_OPERATIONAL = 5
 NMT_BOOT_UP = 0
 
