@@ -324,8 +324,10 @@ def play_sim(
                     late = table.late_steps
                     record = loop.decide()
                     true_x, true_y, _, _ = table.ball(at=record.frame_time)
+                    truth = table.true_state()
                     loop.send(record)
                     goal, out = table.step()
+                    record.truth = {**truth, "goal": int(goal), "out": bool(out)}
                     record.late = table.late_steps > late
                     loop.receive(record)
                     if record.ball_measured is not None:

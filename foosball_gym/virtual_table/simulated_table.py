@@ -390,6 +390,18 @@ class SimulatedTable:
         # Newest first: a serve leaves two entries at one time, and the new ball is the truth.
         return min(reversed(self._balls), key=lambda tb: abs(tb[0] - at))[1]
 
+    def true_state(self) -> dict[str, Any]:
+        """The rods and the ball as they are now, for a session log: ``ball`` (x, y, z) and
+        ``joints`` (rod name -> [slide, spin]), in the joints' own frames."""
+        with self._lock:
+            positions, ball = self.sim.scene()
+        n = len(self.sim.rods)
+        joints = {
+            rod.name: [float(positions[i]), float(positions[n + i])]
+            for i, rod in enumerate(self.sim.rods)
+        }
+        return {"ball": [float(v) for v in ball], "joints": joints}
+
     def close(self) -> None:
         """Stop the clock, the camera and the drives; safe to call twice."""
         stop = getattr(self, "_stop", None)
