@@ -19,9 +19,7 @@ def add_parser(subparsers: Any) -> None:
         "play/pause and speed. `foosball eval --replay` writes one for evaluated episodes.",
     )
     p.add_argument("log", metavar="FILE.jsonl", help="a session log of foosball play --log")
-    p.add_argument(
-        "--html", required=True, metavar="OUT.html", help="the page to write (.html)"
-    )
+    p.add_argument("--html", required=True, metavar="OUT.html", help="the page to write (.html)")
     p.set_defaults(func=run)
 
 

@@ -90,9 +90,11 @@ def recording_from_session(path: str | Path) -> Recording:
         title=f"{env_id}: {path.name}",
         rods=rods,
         notes=[
-            ("a simulated table's session: the true ball beside the estimate the policy saw"
-             if simulated else
-             "a real table's session: the camera's detections and the policy's estimate"),
+            (
+                "a simulated table's session: the true ball beside the estimate the policy saw"
+                if simulated
+                else "a real table's session: the camera's detections and the policy's estimate"
+            ),
         ],
     )
     serve: dict[str, list[Any]] = {}

@@ -349,6 +349,8 @@
       const box = canvas.getBoundingClientRect();
       return [box.left + px / ratio, box.top + py / ratio];
     },
+    // A channel's value ("ball.x", "home_keeper.spin", "t") at the frame shown.
+    value: (name) => value(name, data.episodes[state.episode].start + state.frame),
     get episode() { return state.episode; },
     get frame() { return state.frame; },
     get playing() { return state.playing; },
