@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from foosball_gym import table
 from foosball_gym.replay.recording import Recording, rod_geometry, table_geometry
 
 #: Units of the packed values: positions in 0.1 mm, angles in mrad, times in ms.
@@ -38,9 +39,7 @@ _LIMIT = 2**29
 
 
 def _colours() -> dict[str, list[float]]:
-    from foosball_gym.urdf.generate import COLOURS
-
-    return {name: list(rgba[:3]) for name, rgba in COLOURS.items()}
+    return {name: list(rgba[:3]) for name, rgba in table.COLOURS.items()}
 
 
 def _quantise(values: np.ndarray, unit: float) -> np.ndarray:

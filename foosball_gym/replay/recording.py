@@ -9,8 +9,9 @@ A :class:`Recording` is plain data: built from a ``foosball play --log`` session
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -37,9 +38,9 @@ class Episode:
     """
 
     label: str
-    t: np.ndarray
-    joints: np.ndarray
-    tracks: dict[str, np.ndarray] = field(default_factory=dict)
+    t: Any
+    joints: Any
+    tracks: dict[str, Any] = field(default_factory=dict)
     outcome: str = ""
     events: list[tuple[int, str]] = field(default_factory=list)
 
@@ -147,13 +148,14 @@ def figurine_footprint(name: str, slide: float, spin: float) -> list[tuple[float
     return [(x, y) for y in rod.figurine_y(slide)]
 
 
-def rods_in_table_order(names: Sequence[str]) -> tuple[str, ...]:
+def rods_in_table_order(names: Iterable[str]) -> tuple[str, ...]:
     """``names`` sorted as :data:`foosball_gym.table.RODS` lists them, each once."""
+    names = set(names)
     rank = {rod.name: k for k, rod in enumerate(table.RODS)}
     unknown = sorted(set(names) - set(rank))
     if unknown:
         raise ValueError(f"no such rods: {', '.join(unknown)}")
-    return tuple(sorted(set(names), key=rank.__getitem__))
+    return tuple(sorted(names, key=rank.__getitem__))
 
 
 def nan_pair(value: Sequence[float] | None) -> tuple[float, float]:

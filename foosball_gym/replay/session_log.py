@@ -99,9 +99,10 @@ def recording_from_session(path: str | Path) -> Recording:
     )
     serve: dict[str, list[Any]] = {}
     count = 0
+    out_of_table = False
 
     def close_serve() -> None:
-        nonlocal serve
+        nonlocal serve, out_of_table
         if not serve.get("t"):
             return
         tracks = {"estimate": serve["estimate"], "measured": serve["measured"]}
@@ -114,11 +115,11 @@ def recording_from_session(path: str | Path) -> Recording:
                 t=serve["t"],
                 joints=serve["joints"],
                 tracks=tracks,
-                outcome=_outcome(serve["goals"], serve["out"]) if simulated else "",
+                outcome=_outcome(serve["goals"], out_of_table) if simulated else "",
                 events=serve["events"],
             )
         )
-        serve = {}
+        serve, out_of_table = {}, False
 
     for number, rec in enumerate(records, start=2):
         try:
@@ -127,7 +128,7 @@ def recording_from_session(path: str | Path) -> Recording:
                 count += 1
             if not serve:
                 serve = {k: [] for k in ("t", "joints", "ball", "estimate", "measured", "events")}
-                serve["goals"], serve["out"] = [], False
+                serve["goals"] = []
             frame = len(serve["t"])
             serve["t"].append(float(rec["t"]))
             serve["joints"].append(_joints(rec, rods))
@@ -141,7 +142,7 @@ def recording_from_session(path: str | Path) -> Recording:
                 serve["goals"].append(goal)
                 serve["events"].append((frame, "goal for" if goal > 0 else "goal against"))
             if truth.get("out"):
-                serve["out"] = True
+                out_of_table = True
                 serve["events"].append((frame, "ball off the table"))
         except (KeyError, IndexError, TypeError, ValueError, AttributeError) as err:
             raise LogError(f"{path}: line {number} is not a loop record ({err!r})") from None
