@@ -113,6 +113,7 @@ class SimulatedTable:
         realtime: keep the wall clock's time (see the module's docstring) instead of lock-step.
         gui: show the table in a PyBullet GUI window (needs a display).
         pace: in lock-step, keep steps from running ahead of the wall clock.
+        view: where the GUI window looks from (see :data:`foosball_gym.sim.view.VIEWS`).
     """
 
     def __init__(
@@ -126,6 +127,7 @@ class SimulatedTable:
         realtime: bool = False,
         gui: bool = False,
         pace: bool = False,
+        view: str = "top",
     ) -> None:
         task, options = make_task(env_id, env_kwargs)
         physics = check_physics(*(options.get(k, d) for k, d in PHYSICS_DEFAULTS.items()))
@@ -163,7 +165,7 @@ class SimulatedTable:
             if self.realtime:
                 self._camera = CameraProcess(task.layout.rods, *camera_size)
             if gui:
-                self._viewer = ViewerProcess(task.layout.rods)
+                self._viewer = ViewerProcess(task.layout.rods, view)
                 self._viewer.show(*self.sim.scene())
         except BaseException:
             self.close()
