@@ -6,7 +6,7 @@ table itself, on a canvas, from the frames packed inside it.
 """
 
 from foosball_gym.replay.env_recorder import EnvRecorder
-from foosball_gym.replay.page import check_page_path, render_html, write_html
+from foosball_gym.replay.page import NotebookReplay, check_page_path, render_html, write_html
 from foosball_gym.replay.recording import TRACKS, Episode, Recording
 from foosball_gym.replay.session_log import LogError, recording_from_session
 
@@ -16,6 +16,7 @@ __all__ = [
     "EnvRecorder",
     "Episode",
     "LogError",
+    "NotebookReplay",
     "Recording",
     "recording_from_session",
     "render_html",

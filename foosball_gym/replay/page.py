@@ -159,3 +159,26 @@ def write_html(recording: Recording, path: str | Path) -> Path:
     out = check_page_path(path)
     out.write_text(render_html(recording), encoding="utf-8")
     return out
+
+
+class NotebookReplay:
+    """A replay page inside a notebook's output: ``display(NotebookReplay("run.html"))``.
+
+    The page goes into an iframe of its own (``srcdoc``), so its script and styles keep to
+    themselves; Jupyter shows it in a notebook it trusts (one run in this session).
+
+    Args:
+        path: a page that :func:`write_html` wrote.
+        height: the frame's height in pixels.
+    """
+
+    def __init__(self, path: str | Path, height: int = 760) -> None:
+        self.path = Path(path)
+        self.height = int(height)
+
+    def _repr_html_(self) -> str:
+        page = html.escape(self.path.read_text(encoding="utf-8"), quote=True)
+        return (
+            f'<iframe srcdoc="{page}" sandbox="allow-scripts" title="{self.path.name}" '
+            f'style="width: 100%; height: {self.height}px; border: 0"></iframe>'
+        )
