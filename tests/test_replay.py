@@ -423,3 +423,23 @@ def test_the_replay_module_reads_logs_without_the_simulator(tmp_path):
 def test_a_page_written_for_an_empty_recording_is_refused(tmp_path):
     with pytest.raises(ValueError, match="no episodes"):
         write_html(Recording(title="empty", rods=("home_keeper",)), tmp_path / "x.html")
+
+
+def test_a_notebook_shows_the_page_in_a_frame_of_its_own(browser, block_page):
+    from foosball_gym.replay import NotebookReplay
+
+    path, _ = block_page
+    errors: list[str] = []
+    page = browser.new_page(viewport={"width": 1000, "height": 900})
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        page.set_content(f"<h1>a notebook</h1>{NotebookReplay(path)._repr_html_()}")
+        page.wait_for_function("document.querySelector('iframe').contentDocument === null")
+        frame = next(f for f in page.frames if f != page.main_frame)
+        frame.wait_for_function("document.body && document.body.dataset.ready")
+        assert frame.evaluate("document.body.dataset.ready") == "true"
+        assert "episode 1, seed 5 (1 of 3)" in frame.inner_text("#status")
+    finally:
+        page.close()
+    assert errors == []
