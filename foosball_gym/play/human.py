@@ -52,7 +52,7 @@ KEY_MAP: tuple[tuple[str, str], ...] = (
 #: The key map in one line, for the GUI window.
 KEY_HINT = "up/down slide   left/space kick   right lift"
 
-#: The views a person can play from (:data:`foosball_gym.sim.view.VIEWS`) and their keys: those
+#: The views of the GUI window a person can play from, and their keys: those
 #: that slide the figurines towards world +y and towards -y, those that kick, those that lift.
 VIEW_KEYS: dict[str, tuple[frozenset[str], frozenset[str], frozenset[str], frozenset[str]]] = {
     "top": (UP_KEYS, DOWN_KEYS, KICK_KEYS, LIFT_KEYS),

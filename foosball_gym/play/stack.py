@@ -332,8 +332,8 @@ def play_sim(
                     late = table.late_steps
                     record = loop.decide()
                     true_x, true_y, _, _ = table.ball(at=record.frame_time)
-                    truth = table.true_state()
                     loop.send(record)
+                    truth = table.true_state()  # after the command: it must not wait
                     goal, out = table.step()
                     record.truth = {**truth, "goal": int(goal), "out": bool(out)}
                     record.late = table.late_steps > late
