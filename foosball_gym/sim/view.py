@@ -43,8 +43,8 @@ _TEXT_LINE = 0.045
 # The tilt of the views from behind a goal (degrees below the horizon).
 _PLAYER_PITCH = -62.0
 _YAW = {"top": 0.0, "away": 90.0, "home": -90.0}
-
-
+# PyBullet's text size at a camera this far (m) from the text; farther, it grows in proportion,
+# so that a line looks as large from every view.
 _TEXT_SIZE, _TEXT_SIZE_AT = 2.0, 1.1
 # The table's outer walls and goal pockets (m).
 _OUTER_X = table.POCKET_BACK_X + table.WALL_THICKNESS
