@@ -54,7 +54,11 @@ def virtual_display() -> Iterator[str]:
     )
     os.environ["DISPLAY"] = number
     try:
-        time.sleep(1.0)
+        socket = Path(f"/tmp/.X11-unix/X{number[1:]}")
+        for _ in range(200):
+            if socket.exists():
+                break
+            time.sleep(0.05)
         yield number
     finally:
         del os.environ["DISPLAY"]
