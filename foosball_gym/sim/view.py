@@ -61,6 +61,9 @@ class _Camera:
 
     def __init__(self, client: Any, yaw: float, pitch: float) -> None:
         width, height = client.getDebugVisualizerCamera()[:2]
+        if not width or not height:
+            # No window to ask: a second GUI in one process, which PyBullet does not open.
+            width, height = WINDOW_SIZE
         # The window's camera: 90 degrees of vertical field of view. PyBullet's matrices
         # are column-major.
         projection = client.computeProjectionMatrixFOV(90.0, width / height, 0.01, 1000.0)
