@@ -83,6 +83,11 @@ def add_parser(subparsers: Any) -> None:
         help="keep every Nth frame of --video, which still plays in real time "
         "(default: every frame for .mp4, about 20 a second for .gif)",
     )
+    p.add_argument(
+        "--replay",
+        metavar="OUT.html",
+        help="write every episode into this page, to replay in a browser (foosball replay)",
+    )
     p.set_defaults(func=run)
 
 
@@ -103,6 +108,14 @@ def run(args: argparse.Namespace) -> int:
         ):
             if value is not None:
                 raise CliError(f"{option} {value} needs --video FILE to record into")
+    if args.replay is not None:
+        from foosball_gym.replay import check_page_path
+
+        check_writable("--replay", args.replay)
+        try:
+            check_page_path(args.replay)
+        except ValueError as err:
+            raise CliError(f"--replay {err}") from None
     video_episodes = args.video_episodes or (
         inspect.signature(evaluate).parameters["video_episodes"].default
     )
@@ -145,13 +158,14 @@ def run(args: argparse.Namespace) -> int:
             video=args.video,
             video_episodes=video_episodes,
             video_stride=args.video_stride,
+            replay=args.replay,
         )
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None
     except OSError as err:  # the video cannot be written after all
         raise CliError(f"--video {args.video}: {err}") from None
     print(result.table())
-    written = [path for path in (args.json, args.video) if path]
+    written = [path for path in (args.json, args.video, args.replay) if path]
     if args.json:
         Path(args.json).write_text(json.dumps(result.to_dict(), indent=2))
     if written:

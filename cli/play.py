@@ -134,7 +134,18 @@ def add_parser(subparsers: Any) -> None:
         "also defense, midfield, offense; the others play as the task's opponent (implies "
         "--human)",
     )
-    p.add_argument("--log", metavar="FILE.jsonl", help="log every loop to this file")
+    p.add_argument(
+        "--view",
+        choices=("top", "away"),
+        help="where the GUI window looks from: top (straight down, the policy's goal on the "
+        "left; the default) or away (along the table from behind the away goal, where the "
+        "person playing stands; the keys follow the screen); needs --gui or --human",
+    )
+    p.add_argument(
+        "--log",
+        metavar="FILE.jsonl",
+        help="log every loop to this file (foosball replay FILE.jsonl --html OUT.html shows it)",
+    )
     p.add_argument("--no-status", action="store_true", help="no live status line")
     p.set_defaults(func=run)
 
@@ -189,6 +200,9 @@ def run(args: argparse.Namespace) -> int:
 
     human = args.human_rod or ("keeper" if args.human else None)
     gui = args.gui or human is not None
+    if args.view and not gui:
+        raise CliError("--view chooses where the GUI window looks from: give --gui or --human")
+    view = args.view or "top"
     if gui and args.table != "sim":
         raise CliError("--gui and --human play on the simulated table: give --table sim")
     policy, env_id, env_kwargs = _policy(args)
@@ -204,10 +218,11 @@ def run(args: argparse.Namespace) -> int:
         from foosball_gym.play.human import key_map_text
 
         print(
-            f"You play the away {human.removeprefix('away_')}, defending the goal on the right. "
+            f"You play the away {human.removeprefix('away_')}, defending the goal "
+            f"{'on the right' if view == 'top' else 'nearest you'}. "
             "Click the PyBullet window to give it the keyboard. Keys:"
         )
-        print(key_map_text(), flush=True)
+        print(key_map_text(view), flush=True)
     # The window's own drawing takes a core of two: with it, the table keeps pace in lock-step.
     realtime = args.clock == "realtime" or (args.clock is None and not gui)
     if args.clock and args.table != "sim":
@@ -230,6 +245,7 @@ def run(args: argparse.Namespace) -> int:
                 # A person follows the game at the wall clock's speed; paced lock-step slows
                 # down on a machine that cannot keep up instead of tripping the watchdog.
                 pace=gui and not realtime,
+                view=view,
                 **given(args, "seed", "camera_size"),
             )
         else:

@@ -21,6 +21,7 @@ from foosball_gym.registration import check_env_id
 
 if TYPE_CHECKING:
     from foosball_gym.envs.base import FoosballEnv
+    from foosball_gym.replay import EnvRecorder
 
 Policy = Callable[[np.ndarray], Any]
 
@@ -109,6 +110,7 @@ def evaluate(
     video: str | Path | None = None,
     video_episodes: int = 1,
     video_stride: int | None = None,
+    replay: str | Path | None = None,
 ) -> EvalResult:
     """Run ``episodes`` episodes seeded ``seed, seed + 1, ...`` and summarise them.
 
@@ -125,6 +127,10 @@ def evaluate(
         video_episodes: how many episodes ``video`` holds, 1 to ``episodes``.
         video_stride: keep every this many frames (None: all of them for .mp4, about
             20 a second for .gif, every 3rd at 60 Hz); the video still plays in real time.
+        replay: write every episode, frame by frame, into this self-contained HTML page
+            (see :mod:`foosball_gym.replay`): the table from above with a time slider, and
+            the estimate the policy saw beside the true ball where it observes through the
+            simulated camera (``estimated_state``).
 
     Raises:
         ValueError: ``episodes`` is below 1, ``env_id`` is not registered, an option has a
@@ -144,6 +150,10 @@ def evaluate(
             )
         if video_stride is not None and video_stride < 1:
             raise ValueError(f"video_stride must be at least 1, got {video_stride}")
+    if replay is not None:
+        from foosball_gym.replay.page import check_page_path
+
+        check_page_path(replay)
     check_env_id(env_id)
     kwargs = dict(env_kwargs or {})
     if video is not None:
@@ -169,12 +179,15 @@ def evaluate(
         except Exception:
             env.close()
             raise
+    frames = None if replay is None else _replay_recorder(env, policy_name, opponent_name)
     rewards, lengths = [], []
     successes = goals_for = goals_against = serves = off_table = 0
     try:
         for i in range(episodes):
             start_episode(policy, None if isinstance(opponent, str) else opponent)
             obs, info = env.reset(seed=seed + i)
+            if frames is not None:
+                frames.start(f"episode {i + 1}, seed {seed + i}", obs)
             recorder = writer if i < video_episodes else None
             if recorder is not None:
                 recorder.add(render)
@@ -188,6 +201,8 @@ def evaluate(
                 off_table += bool(info.get("out_of_table"))
                 ended = info["goal"] or info.get("out_of_table") or info.get("stagnated")
                 serves += bool(ended) and not done
+                if frames is not None:
+                    frames.step(obs, info)
                 if recorder is not None:
                     recorder.add(render)
             if recorder is not None:
@@ -195,6 +210,8 @@ def evaluate(
                 if i + 1 == video_episodes:
                     recorder.close()
                     writer = None
+            if frames is not None:
+                frames.end(info)
             rewards.append(total)
             lengths.append(steps)
             successes += bool(info["is_success"])
@@ -208,6 +225,11 @@ def evaluate(
         if writer is not None:
             writer.close()
         env.close()
+    if frames is not None:
+        from foosball_gym.replay import write_html
+
+        frames.recording.notes.append(f"seeds {seed}..{seed + episodes - 1}")
+        write_html(frames.recording, cast("str | Path", replay))
     low, high = wilson_interval(successes, episodes)
     return EvalResult(
         env_id=env_id,
@@ -228,6 +250,13 @@ def evaluate(
         serves=serves,
         off_table=off_table,
     )
+
+
+def _replay_recorder(env: gym.Env, policy_name: str, opponent_name: str | None) -> EnvRecorder:
+    from foosball_gym.replay import EnvRecorder
+
+    title = f"{policy_name} on {env.unwrapped.spec.id if env.unwrapped.spec else 'the table'}"
+    return EnvRecorder(env, title=title + (f" against {opponent_name}" if opponent_name else ""))
 
 
 def start_episode(*policies: Policy | None) -> None:

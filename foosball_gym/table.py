@@ -241,6 +241,18 @@ _DEFENSE = ((-0.1235, 0.1235), 0.1790)
 _OFFENSE = ((-0.184, 0.0, 0.184), 0.1185)
 _MIDFIELD = ((-0.241, -0.1205, 0.0, 0.1205, 0.241), 0.0615)
 
+# The colours (RGBA) the table is drawn in: the URDF's materials, the GUI window and the
+# replay pages alike.
+COLOURS: dict[str, tuple[float, float, float, float]] = {
+    "field": (0.10, 0.45, 0.15, 1.0),
+    "wall": (0.35, 0.22, 0.12, 1.0),
+    "pocket": (0.15, 0.15, 0.15, 1.0),
+    "rod": (0.75, 0.75, 0.78, 1.0),
+    "home": (0.95, 0.95, 0.95, 1.0),
+    "away": (0.10, 0.10, 0.10, 1.0),
+    "ball": (1.0, 0.55, 0.0, 1.0),
+}
+
 # From the home goal to the away goal.
 RODS: tuple[Rod, ...] = (
     _rod(HOME, "keeper", -0.52200, *_KEEPER),

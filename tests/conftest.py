@@ -1,4 +1,5 @@
-"""Shared fixtures: a virtual display for the PyBullet GUI, fresh environments."""
+"""Shared fixtures: a virtual display for the PyBullet GUI, a headless browser, fresh
+environments."""
 
 from __future__ import annotations
 
@@ -40,6 +41,38 @@ def display() -> str:
         del os.environ["DISPLAY"]
         proc.terminate()
         proc.wait(timeout=10)
+
+
+# Chromium as the system installs it (Debian: the chromium package; .ci/run installs it). The
+# flags keep it from reaching for the network: a test page must need none.
+BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
+BROWSER_FLAGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """A headless Chromium driven through Playwright (each page gets a fresh profile)."""
+    executable = next((path for path in map(shutil.which, BROWSERS) if path), None)
+    if executable is None:
+        pytest.skip("needs Chromium from the system's packages (Debian: apt-get install chromium)")
+    sync_api = pytest.importorskip(
+        "playwright.sync_api",
+        reason='drives the browser through Playwright: pip install -e ".[test]"',
+    )
+    with sync_api.sync_playwright() as playwright:
+        launched = playwright.chromium.launch(executable_path=executable, args=BROWSER_FLAGS)
+        try:
+            yield launched
+        finally:
+            launched.close()
 
 
 @pytest.fixture

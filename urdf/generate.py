@@ -26,15 +26,7 @@ LEG_FILE = "figurine_leg.obj"
 # odd, so one is the tip.
 _END_POINTS = 13
 
-COLOURS = {
-    "field": (0.10, 0.45, 0.15, 1.0),
-    "wall": (0.35, 0.22, 0.12, 1.0),
-    "pocket": (0.15, 0.15, 0.15, 1.0),
-    "rod": (0.75, 0.75, 0.78, 1.0),
-    "home": (0.95, 0.95, 0.95, 1.0),
-    "away": (0.10, 0.10, 0.10, 1.0),
-    "ball": (1.0, 0.55, 0.0, 1.0),
-}
+COLOURS = table.COLOURS
 
 
 def _fmt(*values: float) -> str:

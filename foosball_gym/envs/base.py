@@ -267,6 +267,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             self.close()  # a bad opponent: the simulator is open already
             raise
         self._last_render = 0.0
+        self._shown_score = ""
         self._started = False
         self._elapsed = 0
         self._match_steps: int | None = None
@@ -432,6 +433,11 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             if wait > 0:
                 time.sleep(wait)
             self._last_render = time.perf_counter()
+            score = f"goals for {self.game.goals_for}, against {self.game.goals_against}"
+            if self.layout.opponent and score != self._shown_score:
+                # In the window's clear band above the table, written as it changes.
+                self.sim.show_text([score])
+                self._shown_score = score
         return None
 
     def close(self) -> None:

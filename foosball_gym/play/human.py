@@ -12,6 +12,10 @@ left / a / space    kicks: the figurines swing left, towards the policy's goal, 
 right / d (hold)    lifts the figurines: they swing right, towards the person's goal
 ==================  =====================================================================
 
+From the person's own side (``view="away"``: the GUI looks along the table from behind their
+goal, the policy's goal at the top of the screen) the keys follow that screen instead: left and
+right (a, d) slide the rod, up (w, space) kicks towards the policy's goal, down (s) lifts.
+
 The rod's targets change smoothly: holding a key moves the slide target at
 :data:`SLIDE_SPEED`, and a kick holds the figurines forward for :data:`KICK_TIME` before they
 swing back. :class:`HumanOpponent` turns the keys into the away side's action in [-1, 1] (as
@@ -48,6 +52,29 @@ KEY_MAP: tuple[tuple[str, str], ...] = (
 #: The key map in one line, for the GUI window.
 KEY_HINT = "up/down slide   left/space kick   right lift"
 
+#: The views of the GUI window a person can play from, and their keys: those
+#: that slide the figurines towards world +y and towards -y, those that kick, those that lift.
+VIEW_KEYS: dict[str, tuple[frozenset[str], frozenset[str], frozenset[str], frozenset[str]]] = {
+    "top": (UP_KEYS, DOWN_KEYS, KICK_KEYS, LIFT_KEYS),
+    # From behind the away goal the screen's right is +y and its top the policy's goal.
+    "away": (
+        frozenset({"right", "d"}),
+        frozenset({"left", "a"}),
+        frozenset({"up", "w", "space"}),
+        frozenset({"down", "s"}),
+    ),
+}
+KEY_MAPS: dict[str, tuple[tuple[str, str], ...]] = {
+    "top": KEY_MAP,
+    "away": (
+        ("left / a", "slide the rod left (hold)"),
+        ("right / d", "slide the rod right (hold)"),
+        ("up / w / space", "kick: the figurines swing up the screen, towards the policy's goal"),
+        ("down / s", "lift the figurines, towards your goal (hold)"),
+    ),
+}
+KEY_HINTS = {"top": KEY_HINT, "away": "left/right slide   up/space kick   down lift"}
+
 #: How fast holding up or down moves the rod's slide target (m/s).
 SLIDE_SPEED = 1.0
 #: How far a kick swings the figurines forward (rad), and for how long it holds them there (s).
@@ -57,10 +84,22 @@ KICK_TIME = 0.15
 LIFT_ANGLE = 1.4
 
 
-def key_map_text() -> str:
-    """The key map, one key per line."""
-    width = max(len(keys) for keys, _ in KEY_MAP)
-    return "\n".join(f"  {keys:{width}s}  {what}" for keys, what in KEY_MAP)
+def key_map_text(view: str = "top") -> str:
+    """The key map of ``view`` (one of :data:`VIEW_KEYS`), one key per line."""
+    keys_of = KEY_MAPS[check_view(view)]
+    width = max(len(keys) for keys, _ in keys_of)
+    return "\n".join(f"  {keys:{width}s}  {what}" for keys, what in keys_of)
+
+
+def check_view(view: str) -> str:
+    """``view`` if a person can play from it.
+
+    Raises:
+        ValueError: another view; the message lists those allowed.
+    """
+    if view not in VIEW_KEYS:
+        raise ValueError(f"a person plays from the view top or away, not {view!r}")
+    return view
 
 
 def two_player_envs() -> list[str]:
@@ -97,6 +136,8 @@ class KeyboardRod:
         rod: the rod's name.
         dt: the time (s) one :meth:`update` stands for: the table's control step.
         slide_speed, kick_angle, kick_time, lift_angle: see the module's constants.
+        view: where the person sees the table from (:data:`VIEW_KEYS`): the keys follow
+            that screen.
 
     Attributes:
         slide: the slide target (m), in the rod's joint frame.
@@ -112,7 +153,11 @@ class KeyboardRod:
         kick_angle: float = KICK_ANGLE,
         kick_time: float = KICK_TIME,
         lift_angle: float = LIFT_ANGLE,
+        view: str = "top",
     ) -> None:
+        self.plus_keys, self.minus_keys, self.kick_keys, self.lift_keys = VIEW_KEYS[
+            check_view(view)
+        ]
         if not dt > 0:
             raise ValueError(f"dt must be positive, got {dt}")
         self.rod = table.rod(rod)
@@ -130,17 +175,17 @@ class KeyboardRod:
             The slide (m) and spin (rad) targets.
         """
         down = held | pressed  # a key tapped between two steps counts for one step
-        screen_up = bool(down & UP_KEYS) - bool(down & DOWN_KEYS)
-        # A figurine's world y is direction * (slide + offset), and the screen's up is +y.
-        step = self.rod.direction * screen_up * self.slide_speed * self.dt
+        towards = bool(down & self.plus_keys) - bool(down & self.minus_keys)
+        # A figurine's world y is direction * (slide + offset).
+        step = self.rod.direction * towards * self.slide_speed * self.dt
         limit = self.rod.slide_limit
         self.slide = min(limit, max(-limit, self.slide + step))
-        if pressed & KICK_KEYS:
+        if pressed & self.kick_keys:
             self._kick_steps = max(1, round(self.kick_time / self.dt))
         if self._kick_steps:
             self._kick_steps -= 1
             self.spin = self.kick_angle
-        elif down & LIFT_KEYS:
+        elif down & self.lift_keys:
             self.spin = -self.lift_angle
         else:
             self.spin = 0.0
@@ -157,6 +202,7 @@ class HumanOpponent:
         rod: the away rod the person drives (see :func:`human_rod`).
         dt: the table's control step (s); the policy is asked once a step.
         others: the policy of the away rods the person does not drive (None: held at 0).
+        view: where the person sees the table from (see :class:`KeyboardRod`).
     """
 
     def __init__(
@@ -166,12 +212,13 @@ class HumanOpponent:
         rod: str,
         dt: float,
         others: Callable[[np.ndarray], Any] | None = None,
+        view: str = "top",
     ) -> None:
         joints, scales, _ = action_joints(layout.opponent, layout.joints)
         if (rod, "slide") not in joints:
             raise ValueError(f"{rod} is not an away rod of this task: {', '.join(layout.opponent)}")
         self.keys = keys
-        self.controls = KeyboardRod(rod, dt)
+        self.controls = KeyboardRod(rod, dt, view=view)
         self._n = len(joints)
         self._slide = joints.index((rod, "slide"))
         self._spin = joints.index((rod, "spin")) if (rod, "spin") in joints else None

@@ -41,6 +41,10 @@ class LoopRecord:
     #: The frame of ``frame_time`` came too late to use: the filters predicted through it.
     #: (A frame of None with the last frame's time is no new frame due yet, as after a serve.)
     frame_missed: bool = False
+    #: What only a simulated table knows: the true ball (``ball``: x, y, z) and rods
+    #: (``joints``: name -> [slide, spin]) as the loop decided, and what its step brought
+    #: (``goal``: +1, -1 or 0; ``out``: the ball left the table). None on a real table.
+    truth: dict[str, Any] | None = None
 
     @property
     def loop_ms(self) -> float:

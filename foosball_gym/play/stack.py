@@ -22,7 +22,7 @@ import numpy as np
 from foosball_gym.estimation import BallFilter, TableStateEstimator
 from foosball_gym.hardware.config import TableConfig
 from foosball_gym.hardware.drives import TableDrives
-from foosball_gym.play.human import KEY_HINT, HumanOpponent, human_rod
+from foosball_gym.play.human import KEY_HINTS, HumanOpponent, check_view, human_rod
 from foosball_gym.play.loop import STAGES, LoopRecord, PlayLoop, StatusLine
 from foosball_gym.play.session import SessionLog
 from foosball_gym.policy_io.task import TaskInterface
@@ -230,6 +230,7 @@ def play_sim(
     human: str | None = None,
     pace: bool = False,
     camera_latency_s: float | None = None,
+    view: str = "top",
 ) -> PlayReport:
     """Play ``episodes`` served balls on the simulated table, through the whole stack.
 
@@ -248,6 +249,9 @@ def play_sim(
     task's opponent; it opens the GUI. Neither changes the clock: ``pace`` keeps a lock-step
     table from running ahead of the wall clock, which ``foosball play --gui`` chooses.
 
+    ``view`` is where the window looks from: ``"top"`` (straight down, the home goal on the
+    left) or ``"away"`` (from behind the away goal, the person's side); the keys follow it.
+
     Closing the window ends the game after the serve in play.
 
     Raises:
@@ -262,6 +266,7 @@ def play_sim(
         camera_size = REALTIME_CAMERA if realtime or pace else LOCKSTEP_CAMERA
     interface = task_interface(env_id, env_kwargs)
     rod = None if human is None else human_rod(env_id, interface.layout, human)
+    check_view(view)
     gui = gui or rod is not None
     config = virtual_table_config(interface)
     table = SimulatedTable(
@@ -274,11 +279,14 @@ def play_sim(
         realtime=realtime,
         gui=gui,
         pace=pace,
+        view=view,
     )
     if rod is not None:
         keys = table.keyboard_events
         dt = table.sim.control_dt
-        table.set_opponent(HumanOpponent(keys, interface.layout, rod, dt, table.opponent))
+        table.set_opponent(
+            HumanOpponent(keys, interface.layout, rod, dt, table.opponent, view=view)
+        )
     calibration = CameraCalibration.from_camera_model(table.camera_model)
     config.camera["calibration"] = calibration.to_dict()
     perception = build_perception(config, interface, latency_s)
@@ -295,6 +303,7 @@ def play_sim(
             TableDrives(config, clock=table.clock) as drives,
             collector_paused_for_old_objects(),
         ):
+<<<<<<< HEAD
             try:
                 drives.bring_up()
                 loop = PlayLoop(
@@ -355,6 +364,64 @@ def play_sim(
                 # However the loop ended, the table moves on while the drives brake and
                 # switch off: a lock-step table waits for the loop no more.
                 table.run_on()
+=======
+            drives.bring_up()
+            loop = PlayLoop(
+                policy,
+                interface,
+                drives,
+                source,
+                *perception,
+                clock=table.clock,
+                on_record=on_record,
+            )
+            table.step()  # the drives report their state once before the first decision
+            loop.start()
+            record = None
+            for serve in range(1, episodes + 1):
+                table.serve()
+                # Without this the filter would take the new ball for the old one jumping,
+                # and spend the first frames of a fast shot unlearning that velocity.
+                loop.new_ball()
+                if gui:
+                    table.show_text(_score_lines(report, table, serve, episodes, rod, view))
+                if record is not None and realtime:
+                    # The table's clock runs on while the camera shows the new ball: the rods
+                    # keep their last targets, and the watchdog hears the loop is alive.
+                    loop.send(record)
+                for _ in range(max_steps):
+                    # A step the table took while the loop was busy: its command was late.
+                    late = table.late_steps
+                    record = loop.decide()
+                    true_x, true_y, _, _ = table.ball(at=record.frame_time)
+                    loop.send(record)
+                    truth = table.true_state()  # after the command: it must not wait
+                    goal, out = table.step()
+                    record.truth = {**truth, "goal": int(goal), "out": bool(out)}
+                    record.late = table.late_steps > late
+                    loop.receive(record)
+                    if record.ball_measured is not None:
+                        report.ball_error_mm.append(
+                            1e3
+                            * float(
+                                np.hypot(
+                                    record.ball_measured[0] - true_x,
+                                    record.ball_measured[1] - true_y,
+                                )
+                            )
+                        )
+                    if goal and gui:
+                        table.show_text(_score_lines(report, table, serve, episodes, rod, view))
+                    closed = gui and not table.window_open
+                    if goal or out or table.stagnated or closed:
+                        break
+                report.episodes += 1
+                report.successes += table.success
+                report.goals_for += table.goals_for
+                report.goals_against += table.goals_against
+                if gui and not table.window_open:
+                    break  # a person closed the window: the game ends with this serve
+>>>>>>> i34-replay
     finally:
         if log is not None:
             log.close()
@@ -363,14 +430,15 @@ def play_sim(
 
 
 def _score_lines(
-    report: PlayReport, table: Any, serve: int, episodes: int, human: str | None
+    report: PlayReport, table: Any, serve: int, episodes: int, human: str | None, view: str
 ) -> list[str]:
     """What the GUI window shows: the serve and the score, and who the person plays."""
     goals_for = report.goals_for + table.goals_for
     goals_against = report.goals_against + table.goals_against
     lines = [f"serve {serve} of {episodes}   goals for {goals_for}, against {goals_against}"]
     if human is not None:
-        lines.append(f"you: {human.replace('_', ' ')} (right)   {KEY_HINT}")
+        side = "right" if view == "top" else "near"
+        lines.append(f"you: {human.replace('_', ' ')} ({side})   {KEY_HINTS[view]}")
     return lines
 
 

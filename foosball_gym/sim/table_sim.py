@@ -502,6 +502,12 @@ class TableSim:
         if self.gui:
             self._posed_view().show_text(lines)
 
+    def set_view(self, view: str) -> None:
+        """Look at the table in the GUI window from ``view``: ``"top"``, ``"away"`` or
+        ``"home"`` (see :data:`~foosball_gym.sim.view.VIEWS`); without the GUI, nothing."""
+        if self.gui:
+            self._posed_view().set_view(view)
+
     def keyboard_events(self) -> tuple[frozenset[str], frozenset[str]]:
         """The keys held down in the GUI window now, and those pressed since the last call
         (see :meth:`View.keyboard_events`); without the GUI there are no keys."""

@@ -81,9 +81,10 @@ _WINDOW_SPAN = 2 * (table.FIGURINE_REACH + table.BALL_RADIUS) + 0.2
 _PARKED = 10.0
 
 
-def connect(gui: bool = False) -> BulletClient:
+def connect(gui: bool = False, options: str = "") -> BulletClient:
+    """A new Bullet world; ``options`` are the GUI window's (``--width=960 ...``)."""
     with _quiet_stdout():
-        return BulletClient(pybullet.GUI if gui else pybullet.DIRECT)
+        return BulletClient(pybullet.GUI if gui else pybullet.DIRECT, options=options)
 
 
 def _order(names: Sequence[str]) -> tuple[str, ...]:
@@ -125,13 +126,23 @@ def drive_masses(names: tuple[str, ...]) -> tuple[tuple[float, ...], tuple[float
 class World:
     """One Bullet world: the table with the rods ``names``, and a ball.
 
+    ``urdf`` loads another file of the same table and rods (the GUI window's: see
+    :func:`~foosball_gym.sim.urdf.urdf_for_window`); ``window_options`` size the GUI window.
+
     Which of its rods stand in the table (``placed``; the others wait parked, out of the ball's
     way) and what their motors were told (``sent``) is for the simulator to set.
     """
 
-    def __init__(self, names: Sequence[str], *, gui: bool = False) -> None:
+    def __init__(
+        self,
+        names: Sequence[str],
+        *,
+        gui: bool = False,
+        urdf: str | None = None,
+        window_options: str = "",
+    ) -> None:
         self.names = _order(names)
-        self.client = connect(gui)
+        self.client = connect(gui, window_options)
         p = self.client
         cid = p._client
         # BulletClient builds a new partial on every attribute access; the calls made every
@@ -168,8 +179,13 @@ class World:
             p.configureDebugVisualizer(pybullet.COV_ENABLE_SHADOWS, 0)
             # Looking down with the home goal on the left: the screen's right is +x, its up +y.
             p.resetDebugVisualizerCamera(1.1, 0, -89.9, [0, 0, 0])
+<<<<<<< HEAD
         with urdf_file(urdf_with_rods(self.names)) as path, _quiet_stdout():
             self.body = p.loadURDF(path, useFixedBase=True)
+=======
+        with _quiet_stdout():
+            self.body = p.loadURDF(urdf or urdf_with_rods(self.names), useFixedBase=True)
+>>>>>>> i34-replay
         index = {
             p.getJointInfo(self.body, i)[1].decode(): i for i in range(p.getNumJoints(self.body))
         }

@@ -125,6 +125,7 @@ class SimulatedTable:
         realtime: keep the wall clock's time (see the module's docstring) instead of lock-step.
         gui: show the table in a PyBullet GUI window (needs a display).
         pace: in lock-step, keep steps from running ahead of the wall clock.
+        view: where the GUI window looks from (see :data:`foosball_gym.sim.view.VIEWS`).
     """
 
     def __init__(
@@ -138,6 +139,7 @@ class SimulatedTable:
         realtime: bool = False,
         gui: bool = False,
         pace: bool = False,
+        view: str = "top",
     ) -> None:
         task, options = make_task(env_id, env_kwargs)
         physics = check_physics(*(options.get(k, d) for k, d in PHYSICS_DEFAULTS.items()))
@@ -177,7 +179,7 @@ class SimulatedTable:
             if self.realtime:
                 self._camera = CameraProcess(task.layout.rods, *camera_size, kept=kept)
             if gui:
-                self._viewer = ViewerProcess(task.layout.rods)
+                self._viewer = ViewerProcess(task.layout.rods, view)
                 self._viewer.show(*self.sim.scene())
         except BaseException:
             self.close()
@@ -422,6 +424,18 @@ class SimulatedTable:
             balls = list(self._balls)
         # Newest first: a serve leaves two entries at one time, and the new ball is the truth.
         return min(reversed(balls), key=lambda tb: abs(tb[0] - at))[1]
+
+    def true_state(self) -> dict[str, Any]:
+        """The rods and the ball as they are now, for a session log: ``ball`` (x, y, z) and
+        ``joints`` (rod name -> [slide, spin]), in the joints' own frames."""
+        with self._lock:
+            positions, ball = self.sim.scene()
+        n = len(self.sim.rods)
+        joints = {
+            rod.name: [float(positions[i]), float(positions[n + i])]
+            for i, rod in enumerate(self.sim.rods)
+        }
+        return {"ball": [float(v) for v in ball], "joints": joints}
 
     def close(self) -> None:
         """Stop the clock, the camera and the drives; safe to call twice."""

@@ -33,7 +33,7 @@ class WindowError(RuntimeError):
     """The GUI window could not be opened: no display, or one PyBullet cannot reach."""
 
 
-def _serve(conn: Connection, rods: tuple[str, ...]) -> None:
+def _serve(conn: Connection, rods: tuple[str, ...], view_from: str = "top") -> None:
     # The parent ends this process (it sends None, or its end closes the pipe): a Ctrl-C or
     # SIGTERM to the whole process group must reach the parent only, which stops the table
     # and then this.
@@ -46,7 +46,7 @@ def _serve(conn: Connection, rods: tuple[str, ...]) -> None:
     from foosball_gym.sim import View
 
     try:
-        view = View([table.rod(name) for name in rods], gui=True)
+        view = View([table.rod(name) for name in rods], gui=True, view=view_from)
     except Exception as err:  # the parent raises it, with its message
         conn.send(("error", str(err)))
         return
@@ -82,18 +82,19 @@ def _serve(conn: Connection, rods: tuple[str, ...]) -> None:
 
 
 class ViewerProcess:
-    """A GUI window on a table with ``rods``, in a separate process.
+    """A GUI window on a table with ``rods``, in a separate process, seen from ``view`` (see
+    :data:`foosball_gym.sim.view.VIEWS`).
 
     Raises:
         WindowError: the window could not be opened; the message says why.
     """
 
-    def __init__(self, rods: Sequence[str]) -> None:
+    def __init__(self, rods: Sequence[str], view: str = "top") -> None:
         display = os.environ.get("DISPLAY")
         # Spawned, not forked: a forked child would share the parent's PyBullet client.
         context = multiprocessing.get_context("spawn")
         self._conn, child = context.Pipe()
-        self._process = context.Process(target=_serve, args=(child, tuple(rods)), daemon=True)
+        self._process = context.Process(target=_serve, args=(child, tuple(rods), view), daemon=True)
         self._process.start()
         child.close()
         try:
