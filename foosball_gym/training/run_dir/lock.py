@@ -43,7 +43,7 @@ def run_lock(run: Path) -> Iterator[None]:
     except Timeout:
         raise RunInUseError(
             f"{run} is being written by another training, which holds {path}: wait for it "
-            "to end, or choose another --out"
+            "to end (or train into another folder)"
         ) from None
     except BaseException:
         if created:

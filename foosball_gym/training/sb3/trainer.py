@@ -138,7 +138,14 @@ def train(
                 PhysicsMismatchWarning,
                 stacklevel=2,
             )
-    config.check()
+    try:
+        config.check()
+    except (ValueError, TypeError) as err:
+        if not resume:
+            raise
+        # A value the run's own file holds: say which file.
+        kind = ValueError if isinstance(err, ValueError) else TypeError
+        raise kind(f"{out / CONFIG_FILE}: {err}") from None
     th.set_num_threads(config.torch_threads)
     # Everything written into the run from here is written by this training alone.
     with run_lock(out):

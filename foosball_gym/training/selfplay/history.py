@@ -77,7 +77,7 @@ def set_aside_generations(save_dir: Path, timesteps: int, lost: Path) -> int:
     gate = save_dir / GATE_LOG
     if gate.exists():
         lines = gate.read_text().splitlines(keepends=True)
-        late = [line for line in lines if json.loads(line).get("timesteps", 0) > timesteps]
+        late = [line for line in lines if _verdict_steps(line, gate) > timesteps]
         if late:
             atomic_write_text(lost / GATE_LOG, "".join(late))
             atomic_write_text(gate, "".join(line for line in lines if line not in late))
@@ -109,6 +109,16 @@ def restored_elo(history: list[dict[str, Any]], generations: list[int]) -> float
     runs from before ratings were recorded)."""
     by_generation = {h["generation"]: h.get("elo") or 0.0 for h in history}
     return float(np.mean([by_generation.get(g, 0.0) for g in generations]))
+
+
+def _verdict_steps(line: str, gate: Path) -> int:
+    try:
+        steps = json.loads(line)["timesteps"]
+    except (json.JSONDecodeError, KeyError, TypeError):
+        steps = None
+    if not isinstance(steps, int):
+        raise ValueError(f"{gate} is damaged: a line is not a verdict with its timesteps")
+    return steps
 
 
 class SnapshotHistory:
