@@ -183,8 +183,8 @@ def test_statistics_that_make_no_sense_are_refused(run, capsys, change, message)
         load_policy(run)
 
 
-def test_the_statistics_a_run_writes_pass_the_checks():
-    # The shipped policies' files (from before the statistics went into the zip) too.
+def test_the_shipped_policies_statistics_pass_the_checks():
+    # Written before the statistics went into the zip: beside it.
     from foosball_gym.training.loading.loader import builtin_names, builtin_path
 
     for name in builtin_names():
