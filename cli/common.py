@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import ast
+import errno
 import importlib
 import inspect
 import math
 import os
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -106,10 +108,15 @@ def check_writable(option: str, path: str) -> None:
         raise CliError(f"{option} {path} is a directory; give a file name")
     if not target.parent.is_dir():
         raise CliError(f"{option} {path}: there is no folder {target.parent}")
-    # Asked of the file system, not tried: a file created now would be left empty if the
-    # work stopped.
-    if not os.access(target if target.exists() else target.parent, os.W_OK):
-        raise CliError(f"{option} {path} cannot be written: permission denied")
+    try:
+        if target.exists():
+            # Opened to append and closed, it is neither changed nor emptied.
+            with open(target, "ab"):
+                pass
+        else:
+            _try_creating(target.parent, file=True)
+    except OSError as err:
+        raise CliError(f"{option} {path} cannot be written: {err.strerror}") from None
 
 
 def check_directory(option: str, path: str | Path) -> None:
@@ -120,8 +127,45 @@ def check_directory(option: str, path: str | Path) -> None:
         existing = existing.parent
     if not existing.is_dir():
         raise CliError(f"{option} {path}: {existing} is a file, not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise CliError(f"{option} {path} cannot be written: permission denied")
+    try:
+        _try_creating(existing, file=False)
+    except OSError as err:
+        raise CliError(f"{option} {path} cannot be written: {err.strerror}") from None
+
+
+def _try_creating(folder: Path, file: bool) -> None:
+    """Create a file (or a folder) of a name no one uses in ``folder``, and remove it: what
+    the file system allows is asked by trying, since permissions do not say it all (a
+    read-only mount, /proc, root's rights)."""
+    if file:
+        fd, name = tempfile.mkstemp(dir=folder, prefix=".foosball-probe-")
+        os.close(fd)
+        os.unlink(name)
+    else:
+        os.rmdir(tempfile.mkdtemp(dir=folder, prefix=".foosball-probe-"))
+
+
+def storage_failure(option: str, run: Path, err: OSError) -> str:
+    """What to tell of a run directory whose storage failed during training (full, read-only,
+    not permitted), in one line: what could not be written, why, and how the run goes on.
+
+    Raises:
+        OSError: ``err`` is no failure of the storage (it names no file and is none of
+            :data:`~foosball_gym.training.run_dir.files.STORAGE_ERRNOS`): a fault to report
+            as it is.
+    """
+    from foosball_gym.training.run_dir.files import has_checkpoint, storage_error
+
+    if err.filename is None and not storage_error(err):
+        raise err
+    where = err.filename or run
+    line = f"{option} {run}: cannot write {where}: {err.strerror or err}"
+    if err.errno in (errno.ENOSPC, errno.EDQUOT) and has_checkpoint(run):
+        line += (
+            "; once there is room, go on from its last checkpoint with: "
+            f"foosball train --resume {run}"
+        )
+    return line
 
 
 def positive_int(text: str) -> int:

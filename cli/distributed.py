@@ -11,7 +11,7 @@ from foosball_gym.training.config import TrainConfig
 from foosball_gym.training.rllib.ray_start import INSTALL, require_ray
 from foosball_gym.training.run_dir.files import CONFIG_FILE, RLLIB_BACKEND, has_checkpoint
 
-from .common import CliError, check_directory
+from .common import CliError, check_directory, storage_failure
 
 
 def _worker_count(text: str) -> int:
@@ -68,9 +68,12 @@ def run_from_args(args: argparse.Namespace, config: TrainConfig | None = None) -
         out = Path(args.resume)
         if not (out / CONFIG_FILE).exists():
             raise CliError(f"--resume {out}: no run there ({CONFIG_FILE} is missing)")
+        try:
+            config = TrainConfig.load(out / CONFIG_FILE)
+        except (ValueError, TypeError) as err:
+            raise CliError(f"--resume {out}: {err}") from None
         if not has_checkpoint(out):
             print(f"{out} has no checkpoint yet: starting the run over from its {CONFIG_FILE}")
-        config = TrainConfig.load(out / CONFIG_FILE)
     else:
         if config is None:
             raise CliError("give an environment id (see `foosball envs`) or --resume DIR")
@@ -84,6 +87,8 @@ def run_from_args(args: argparse.Namespace, config: TrainConfig | None = None) -
         raise CliError(str(err)) from None
     except ConnectionError as err:
         raise CliError(f"--address {args.address}: {err}") from None
+    except OSError as err:
+        raise CliError(storage_failure("--resume" if resume else "--out", out, err)) from None
     if result.signal is not None:
         name = signal.Signals(result.signal).name
         print(

@@ -167,7 +167,10 @@ def run(args: argparse.Namespace) -> int:
     print(result.table())
     written = [path for path in (args.json, args.video, args.replay) if path]
     if args.json:
-        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2))
+        try:
+            Path(args.json).write_text(json.dumps(result.to_dict(), indent=2))
+        except OSError as err:
+            raise CliError(f"--json {args.json} cannot be written: {err.strerror}") from None
     if written:
         print("wrote " + " and ".join(written))
     return 0

@@ -102,8 +102,8 @@ def run(args: argparse.Namespace) -> int:
     elif args.env:
         raise CliError(f"--env {args.env}: a run's league plays the run's own game; leave it out")
     out = Path(args.out or args.run)
-    if args.out:
-        check_directory("--out", out)
+    # Before the games: the league is written where they end.
+    check_directory("--out" if args.out else "RUN", out)
     env_overrides = parse_env_kwargs(args.env_kwarg)
     if args.run is None:
         players: list[Player] = []
@@ -153,6 +153,11 @@ def run(args: argparse.Namespace) -> int:
     trend = rising(league)
     if trend == trend:  # not NaN
         print(f"rank correlation of rating with training steps: {trend:+.2f}")
-    json_path, png = write_league(league, out)
+    try:
+        json_path, png = write_league(league, out)
+    except OSError as err:
+        raise CliError(
+            f"{'--out' if args.out else 'RUN'} {out} cannot be written: {err.strerror}"
+        ) from None
     print("wrote " + " and ".join(str(p) for p in (json_path, png) if p))
     return 0

@@ -36,6 +36,7 @@ from .common import (
     positive_int,
     positive_number,
     seed,
+    storage_failure,
 )
 from .distributed import add_rllib_arguments, run_from_args
 
@@ -198,6 +199,13 @@ def _settings_given(args: argparse.Namespace) -> list[str]:
     return given
 
 
+def _backend(run: str) -> str:
+    try:
+        return read_backend(run)
+    except ValueError as err:
+        raise CliError(f"--resume {run}: {err}") from None
+
+
 def run(args: argparse.Namespace) -> int:
     if args.resume and args.config:
         raise CliError(
@@ -209,9 +217,7 @@ def run(args: argparse.Namespace) -> int:
             f"{', '.join(given)} with --resume {args.resume}: a run continues with the settings "
             f"in its {CONFIG_FILE}; leave {'it' if len(given) == 1 else 'them'} out"
         )
-    if args.backend == RLLIB_BACKEND or (
-        args.resume and read_backend(args.resume) == RLLIB_BACKEND
-    ):
+    if args.backend == RLLIB_BACKEND or (args.resume and _backend(args.resume) == RLLIB_BACKEND):
         if args.resume and args.timesteps is not None:
             raise CliError(
                 f"--timesteps with --resume {args.resume}: an rllib run continues to the "
@@ -232,7 +238,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             config = TrainConfig.load(out / CONFIG_FILE)
         except (ValueError, TypeError) as err:  # JSONDecodeError is a ValueError
-            raise CliError(f"--resume {out}: {out / CONFIG_FILE} is not a run's: {err}") from None
+            raise CliError(f"--resume {out}: {err}") from None
         if not has_checkpoint(out):
             print(f"{out} has no checkpoint yet: starting the run over from its {CONFIG_FILE}")
     else:
@@ -254,9 +260,7 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None
     except OSError as err:
-        if err.filename is None:  # not the file system's: no argument to blame
-            raise
-        raise CliError(f"--out {out}: cannot write {err.filename}: {err.strerror}") from None
+        raise CliError(storage_failure("--resume" if args.resume else "--out", out, err)) from None
     if result.signal is not None:
         name = signal.Signals(result.signal).name
         print(

@@ -2,8 +2,9 @@
 
     python scripts/ship_policy.py RUN_DIR NAME --command "foosball train ..."
 
-Ships the model, its normalisation statistics, the resolved configuration, the evaluation
-curve and a REPRODUCE.md with the command and seed that made it.
+Ships the model (which holds its normalisation statistics; a run from before kept them beside
+it in vecnormalize.json), the resolved configuration, the evaluation curve and a REPRODUCE.md
+with the command and seed that made it.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ def main() -> None:
     for name in FILES:
         if (args.run / name).exists():
             shutil.copy2(args.run / name, target / name)
+        else:  # the policy shipped there before had it: it is not this one's
+            (target / name).unlink(missing_ok=True)
     config = json.loads((args.run / "config.json").read_text())
     (target / "REPRODUCE.md").write_text(
         f"# builtin:{args.name}\n\n"

@@ -20,6 +20,11 @@ from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
 from foosball_gym.training.loading import ModelLoadError, load_policy  # noqa: E402
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot  # noqa: E402
+from foosball_gym.training.run_dir.storage import (  # noqa: E402
+    ZIP_RECORD,
+    statistics_beside,
+    zip_statistics,
+)
 from foosball_gym.training.sb3.trainer import train  # noqa: E402
 
 CHECKPOINT = "checkpoints/model_0000000128"
@@ -59,7 +64,30 @@ def trained(tmp_path_factory):
 
 @pytest.fixture
 def run(trained, tmp_path):
-    return Path(shutil.copytree(trained, tmp_path / "run"))
+    """A run as it was written before its statistics went into its zips."""
+    return statistics_beside_zips(trained, tmp_path / "run")
+
+
+def statistics_beside_zips(run: Path, dst: Path) -> Path:
+    """``run`` as runs were written before the statistics went into the model zips: a
+    ``vecnormalize.json`` beside each zip, named by ``checkpoints/latest.json`` for the last
+    checkpoint."""
+    shutil.copytree(run, dst)
+    for path in sorted(dst.rglob("*.zip")):
+        recorded, stats = zip_statistics(path)
+        assert recorded
+        with zipfile.ZipFile(path) as archive:
+            entries = {n: archive.read(n) for n in archive.namelist() if n != ZIP_RECORD}
+        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+            for n, c in entries.items():
+                archive.writestr(n, c)
+        if stats is not None:
+            stats.save(statistics_beside(path)[-1])
+    pointer = dst / "checkpoints" / "latest.json"
+    data = json.loads(pointer.read_text())
+    data["vecnormalize"] = data["model"].replace(".zip", "_vecnormalize.json")
+    pointer.write_text(json.dumps(data))
+    return dst
 
 
 def zip_data(path: Path) -> dict:
@@ -83,8 +111,10 @@ def test_a_new_run_stores_no_pickle(trained):
     for path in zips:
         data = zip_data(path)
         assert not [k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v]
-    stats = json.loads((trained / "vecnormalize.json").read_text())
-    assert len(stats["obs_mean"]) == 6 and stats["obs_count"] > 0
+        recorded, stats = zip_statistics(path)
+        assert recorded and len(stats.obs_mean) == 6 and stats.obs_count > 0, path
+    # Nothing beside the zips to disagree with them.
+    assert not list(trained.rglob("*vecnormalize*"))
 
 
 def test_a_legacy_normalisation_pickle_is_refused_and_read_only_when_trusted(run, tmp_path):
@@ -190,7 +220,7 @@ def legacy_copy(run: Path, dst: Path) -> Path:
 
     from foosball_gym.training.run_dir.storage import NormStats
 
-    shutil.copytree(run, dst)
+    statistics_beside_zips(run, dst)
     venv = VecNormalize(make_vec_env("Foosball-Block-v0", n_envs=1))
     for path in sorted(dst.rglob("*vecnormalize.json")):
         NormStats.load(path).apply(venv)

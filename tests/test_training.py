@@ -62,7 +62,6 @@ def test_cli_trains_block_and_the_result_evaluates_through_the_cli(tmp_path, cap
     for name in (
         "model.zip",
         "config.json",
-        "vecnormalize.json",
         "eval.csv",
         "eval.png",
         "checkpoints/latest.json",

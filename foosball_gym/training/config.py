@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, cast
 import gymnasium as gym
 
 from foosball_gym.registration import check_env_id
-from foosball_gym.training.run_dir.files import atomic_write_text
+from foosball_gym.training.run_dir.files import atomic_write_text, read_json
 from foosball_gym.training.run_dir.physics import physics_record
 from foosball_gym.training.selfplay.rule import check_rule, default_threshold
 
@@ -248,11 +248,60 @@ class TrainConfig:
 
     @classmethod
     def load(cls, path: Path) -> TrainConfig:
-        data = json.loads(Path(path).read_text())
+        """A run's configuration from its ``config.json``.
+
+        Raises:
+            ValueError: the file is not JSON, not an object, lacks ``env_id`` or holds a field
+                of the wrong kind (the message names the file and the field); the values'
+                ranges are :meth:`check`'s.
+        """
+        data = read_json(path, dict, "a run's configuration")
         names = {f.name for f in fields(cls)}
+        if "env_id" not in data:
+            raise ValueError(f"{path} is damaged: it names no env_id")
+        for f in fields(cls):
+            if f.name in data and not _of_kind(data[f.name], str(f.type)):
+                raise ValueError(
+                    f"{path} is damaged: {f.name} must be {_KINDS_SPELLED[str(f.type)]}, "
+                    f"got {data[f.name]!r}"
+                )
         if data.get("self_play") and "selfplay_rule" not in data:
             # Runs from before the rule was an option replaced their opponent on net score.
             data["selfplay_rule"] = "net_score"
         config = cls(**{k: v for k, v in data.items() if k in names})
         config.net_arch = tuple(config.net_arch)
         return config
+
+
+# How config.json spells each kind of field (by its annotation), and what it must hold.
+_KINDS_SPELLED = {
+    "str": "a string",
+    "int": "a whole number",
+    "int | None": "a whole number or null",
+    "float": "a number",
+    "float | None": "a number or null",
+    "bool": "true or false",
+    "bool | None": "true, false or null",
+    "tuple[int, ...]": "a list of whole numbers",
+    "dict[str, Any]": "an object",
+}
+
+
+def _of_kind(value: Any, kind: str) -> bool:
+    def whole(v: Any) -> bool:
+        return isinstance(v, int) and not isinstance(v, bool)
+
+    if kind.endswith(" | None") and value is None:
+        return True
+    kind = kind.removesuffix(" | None")
+    if kind == "int":
+        return whole(value)
+    if kind == "float":
+        return whole(value) or isinstance(value, float)
+    if kind == "bool":
+        return isinstance(value, bool)
+    if kind == "str":
+        return isinstance(value, str)
+    if kind == "tuple[int, ...]":
+        return isinstance(value, list) and all(whole(v) for v in value)
+    return isinstance(value, dict)

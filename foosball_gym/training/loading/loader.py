@@ -8,6 +8,7 @@ algorithm.
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -42,6 +43,7 @@ from foosball_gym.training.run_dir.storage import (
     load_pickled_norm,
     read_model_zip,
     read_norm,
+    zip_statistics,
 )
 
 
@@ -151,9 +153,12 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
 
     Nothing is unpickled unless ``trust`` is given: the weights are read as tensors and the
     policy rebuilt around them, the pickled fields SB3 keeps in the zip are left unread, and
-    normalisation statistics are read from ``vecnormalize.json``. A run from before that file
-    (``vecnormalize.pkl``) is refused with a message saying how to migrate it; an RL Zoo run's
-    ``vecnormalize.pkl``, with one saying to trust it.
+    normalisation statistics are read from the zip's own record (a zip from before it, from
+    ``vecnormalize.json`` beside it). A run from before that file (``vecnormalize.pkl``) is
+    refused with a message saying how to migrate it; an RL Zoo run's ``vecnormalize.pkl``,
+    with one saying to trust it. A model whose run normalised its observations but whose
+    statistics are missing, statistics that make no sense, or statistics of another size of
+    observation are refused too: the policy would act on observations it never saw.
 
     Warns with :class:`~foosball_gym.training.run_dir.physics.PhysicsMismatchWarning` where
     the model was trained on another physics revision than the current one (a run from before
@@ -206,13 +211,33 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
             raise ModelLoadError(f"no model at {zip_path}")
         config = _find_config(run_dir)
         env_id = (config or {}).get("env_id")
-        env_kwargs = dict((config or {}).get("env_kwargs", {}))
+        env_kwargs = dict((config or {}).get("env_kwargs") or {})
         norm = _find_norm(zip_path, run_dir)
     policy, recurrent = _read_policy(zip_path)
-    stats = None
-    if norm is not None:
+    try:
+        recorded, stats = zip_statistics(zip_path)
+    except ValueError as err:
+        raise ModelLoadError(f"{zip_path}: {err}") from None
+    if recorded and norm is not None and not zoo:
+        warnings.warn(
+            f"{norm} is not read: {zip_path} holds its own normalisation statistics",
+            stacklevel=2,
+        )
+    elif not recorded and norm is not None:
         run = text if text.startswith("builtin:") else run_dir
         stats = _read_stats(norm, run, trust, zoo)
+    elif not recorded and config is not None and config.get("normalize", True):
+        raise ModelLoadError(
+            f"{zip_path} was trained on normalised observations ({CONFIG_FILE} says normalize: "
+            f"true), but its statistics ({_find_norm_names(zip_path, run_dir)}) are missing: "
+            "without them the policy acts on observations it never saw (a run killed between "
+            "writing the two?); the run's other models (checkpoints/, best/) may have theirs"
+        )
+    if stats is not None and stats.norm_obs and len(stats.obs_mean) != policy_size(policy):
+        raise ModelLoadError(
+            f"the normalisation statistics of {zip_path} are of {len(stats.obs_mean)} "
+            f"observations, the policy takes {policy_size(policy)}: they are another model's"
+        )
     cls = RecurrentSnapshot if recurrent else PolicySnapshot
     if stats is not None and stats.norm_obs:
         snapshot = cls(
@@ -269,25 +294,63 @@ def _read_stats(norm: Path, run: Path | str, trust: bool, zoo: bool) -> NormStat
     except UntrustedFileError as err:
         raise ModelLoadError(str(err)) from None
     except Exception as err:  # noqa: BLE001 - any unreadable file gets the same message
-        raise ModelLoadError(f"cannot read normalisation statistics {norm}: {err}") from err
+        detail = str(err) if str(norm) in str(err) else f"{norm}: {err}"
+        raise ModelLoadError(f"cannot read normalisation statistics: {detail}") from err
+
+
+def policy_size(policy: Any) -> int:
+    """The size of the observations an SB3 policy takes."""
+    return int(np.prod(policy.observation_space.shape))
 
 
 def _find_config(run_dir: Path) -> dict[str, Any] | None:
+    """The run's ``config.json`` (beside the zip or one level up), checked as far as loading
+    a model reads it; ModelLoadError in one line where it is damaged."""
+    from foosball_gym.envs.options import check_residual
+
     for candidate in (run_dir / CONFIG_FILE, run_dir.parent / CONFIG_FILE):
         if candidate.exists():
             try:
-                return json.loads(candidate.read_text())
-            except json.JSONDecodeError as err:
-                raise ModelLoadError(f"{candidate} is not valid JSON: {err}") from err
+                config = json.loads(candidate.read_text())
+            except (json.JSONDecodeError, UnicodeDecodeError) as err:
+                raise ModelLoadError(f"{candidate} is not valid JSON: {err}") from None
+            if not isinstance(config, dict):
+                raise ModelLoadError(
+                    f"{candidate} holds a JSON {type(config).__name__}, not a run's "
+                    "configuration (an object)"
+                )
+            env_id, env_kwargs = config.get("env_id"), config.get("env_kwargs", {})
+            problem = None
+            if env_id is not None and not isinstance(env_id, str):
+                problem = f"env_id must be an environment id, got {env_id!r}"
+            elif not isinstance(env_kwargs, dict):
+                problem = f"env_kwargs must be an object of options, got {env_kwargs!r}"
+            elif not isinstance(config.get("normalize", True), bool):
+                problem = f"normalize must be true or false, got {config['normalize']!r}"
+            else:
+                try:
+                    check_residual(env_kwargs.get("residual", 0.0))
+                except ValueError as err:
+                    problem = f"env_kwargs: {err}"
+            if problem:
+                raise ModelLoadError(f"{candidate} is damaged: {problem}")
+            return config
     return None
+
+
+def _norm_candidates(zip_path: Path, run_dir: Path) -> list[Path]:
+    candidates = [zip_path.with_name(f"{zip_path.stem}_{name}") for name in NORM_NAMES]
+    return candidates + [run_dir / name for name in NORM_NAMES]
 
 
 def _find_norm(zip_path: Path, run_dir: Path) -> Path | None:
     """The model's own statistics (a checkpoint's) before the run's; at each place the plain
     file before a legacy pickle, so a pickle beside a plain file is never read."""
-    candidates = [zip_path.with_name(f"{zip_path.stem}_{name}") for name in NORM_NAMES]
-    candidates += [run_dir / name for name in NORM_NAMES]
-    return next((c for c in candidates if c.exists()), None)
+    return next((c for c in _norm_candidates(zip_path, run_dir) if c.exists()), None)
+
+
+def _find_norm_names(zip_path: Path, run_dir: Path) -> str:
+    return " or ".join(str(c) for c in _norm_candidates(zip_path, run_dir)[::2])
 
 
 NORM_NAMES = (NORM_FILE, LEGACY_NORM_FILE)

@@ -18,6 +18,7 @@ import numpy as np
 
 from foosball_gym.training.run_dir.files import CONFIG_FILE, POLICY_FILE, POLICY_INFO_FILE
 from foosball_gym.training.run_dir.physics import warn_physics
+from foosball_gym.training.run_dir.storage import check_torch_file
 from foosball_gym.training.run_dir.tensors import load_tensors
 
 POLICY_FORMAT = 1
@@ -147,6 +148,7 @@ def load_rllib_policy(run_dir: str | Path) -> RllibPolicy:
             f"{run_dir / POLICY_INFO_FILE} is of an unknown format {info.get('format')!r} "
             f"(this version reads {POLICY_FORMAT})"
         )
+    check_torch_file(run_dir / POLICY_FILE)
     try:
         tensors = th.load(run_dir / POLICY_FILE, map_location="cpu", weights_only=True)
     except Exception as err:  # noqa: BLE001 - any unreadable file gets the same message

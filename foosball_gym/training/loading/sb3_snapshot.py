@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import inspect
+import io
 import pickle
 import re
 from collections.abc import Mapping
@@ -20,7 +21,8 @@ import numpy.typing as npt
 import torch as th
 from gymnasium import spaces
 
-from foosball_gym.training.run_dir.storage import refusal
+from foosball_gym.training.run_dir.files import write_bytes
+from foosball_gym.training.run_dir.storage import check_torch_file, refusal
 
 SNAPSHOT_FORMAT = 1
 
@@ -210,7 +212,7 @@ class PolicySnapshot:
     def save(self, path: str | Path) -> None:
         """Write the snapshot (weights, normalisation) atomically, as tensors and numbers."""
         path = Path(path)
-        tmp = path.with_suffix(path.suffix + ".tmp")
+        buffer = io.BytesIO()
 
         def tensor(value: np.ndarray | None) -> th.Tensor | None:
             return None if value is None else th.as_tensor(value, dtype=th.float64)
@@ -225,9 +227,9 @@ class PolicySnapshot:
                 "epsilon": self.epsilon,
                 "generation": self.generation,
             },
-            tmp,
+            buffer,
         )
-        tmp.replace(path)
+        write_bytes(path, buffer.getvalue())
 
     @classmethod
     def load(cls, path: str | Path, trust: bool = False) -> PolicySnapshot:
@@ -242,6 +244,7 @@ class PolicySnapshot:
             ValueError: the file is not a snapshot.
         """
         path = Path(path)
+        check_torch_file(path)
         try:
             data = th.load(path, map_location="cpu", weights_only=True)
         except pickle.UnpicklingError:

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 from collections.abc import Mapping
 from pathlib import Path
@@ -16,6 +17,7 @@ from foosball_gym.training.run_dir.files import (
     POLICY_INFO_FILE,
     RLLIB_BACKEND,
     atomic_write_text,
+    write_bytes,
 )
 from foosball_gym.training.run_dir.physics import physics_record
 
@@ -66,7 +68,7 @@ def export_policy(
         "physics": physics_record(),
     }
     directory.mkdir(parents=True, exist_ok=True)
-    tmp = directory / (POLICY_FILE + ".tmp")
-    th.save(tensors, tmp)
-    tmp.replace(directory / POLICY_FILE)
+    buffer = io.BytesIO()
+    th.save(tensors, buffer)
+    write_bytes(directory / POLICY_FILE, buffer.getvalue())
     atomic_write_text(directory / POLICY_INFO_FILE, json.dumps(info, indent=2))

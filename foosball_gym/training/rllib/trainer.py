@@ -20,6 +20,7 @@ import numpy as np
 from foosball_gym.evaluation import evaluate
 from foosball_gym.training.config import TrainConfig
 from foosball_gym.training.loading.rllib_policy import actor_layers, load_rllib_policy
+from foosball_gym.training.resume import set_aside_after
 from foosball_gym.training.rllib.env_runner import (
     ENV_NAME,
     LEARNER,
@@ -47,15 +48,17 @@ from foosball_gym.training.run_dir.files import (
     clear_stale,
     has_checkpoint,
     read_backend,
+    read_latest,
     write_latest,
 )
+from foosball_gym.training.run_dir.lock import run_lock
 from foosball_gym.training.run_dir.physics import (
     PhysicsMismatchWarning,
     physics_mismatch,
     physics_record,
 )
 from foosball_gym.training.run_dir.tensors import load_tensors, save_tensors
-from foosball_gym.training.signals import SignalStop
+from foosball_gym.training.signals import Interrupted, SignalStop
 
 BACKEND = RLLIB_BACKEND
 
@@ -111,9 +114,7 @@ def train_rllib(
             (without ``resume``) or another backend's run.
     """
     require_ray()
-    import ray
     import torch as th
-    from ray.tune.registry import register_env
 
     out = Path(out)
     if resume:
@@ -131,13 +132,27 @@ def train_rllib(
     config.normalize = False
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out} is a file, not a run directory")
-    continuing = resume and has_checkpoint(out)
-    if not resume and has_checkpoint(out):
-        raise ValueError(
-            f"{out} already holds a run; use --resume to continue it or choose another --out"
-        )
-    out.mkdir(parents=True, exist_ok=True)
     th.set_num_threads(config.torch_threads)
+    # Everything written into the run from here is written by this training alone.
+    with run_lock(out):
+        continuing = resume and has_checkpoint(out)
+        if not resume and has_checkpoint(out):
+            raise ValueError(
+                f"{out} already holds a run; use --resume to continue it or choose another --out"
+            )
+        return _train(config, out, continuing, num_workers, address, verbose)
+
+
+def _train(
+    config: TrainConfig,
+    out: Path,
+    continuing: bool,
+    num_workers: int,
+    address: str | None,
+    verbose: int,
+) -> RllibTrainResult:
+    import ray
+    from ray.tune.registry import register_env
 
     selfplay = OpponentPool(config, out / SELFPLAY_DIR)
     curve = EvalCurve(out, config.env_id)
@@ -145,8 +160,11 @@ def train_rllib(
     pointer: dict[str, Any] | None = None
     restored: dict[str, Any] = {}
     if continuing:
-        pointer = json.loads((out / CHECKPOINT_DIR / LATEST_FILE).read_text())
+        pointer = read_latest(out)
+        if pointer is None or "checkpoint" not in pointer:
+            raise ValueError(f"{out / CHECKPOINT_DIR / LATEST_FILE} names no rllib checkpoint")
         done_steps = int(pointer["timesteps"])
+        set_aside_after(out, done_steps, config.env_id)
         restored = selfplay.restore()
         wall_offset = curve.wall_seconds()
     else:
@@ -212,7 +230,7 @@ def train_rllib(
             export(step_dir, state)
             write_latest(out, {"checkpoint": name, "timesteps": steps, "backend": BACKEND})
 
-        def run_eval() -> dict[str, Any]:
+        def run_eval() -> dict[str, Any] | None:
             nonlocal last_eval
             # Evaluated as exported, so the curve measures the policy `foosball eval` loads.
             candidate = best.dir / "candidate"
@@ -220,13 +238,18 @@ def train_rllib(
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", PhysicsMismatchWarning)
                 policy = load_rllib_policy(candidate)
-            res = evaluate(
-                policy,
-                config.env_id,
-                config.env_kwargs,
-                episodes=config.eval_episodes,
-                seed=EVAL_SEED,
-            )
+            try:
+                with stop.interruptible():
+                    res = evaluate(
+                        policy,
+                        config.env_id,
+                        config.env_kwargs,
+                        episodes=config.eval_episodes,
+                        seed=EVAL_SEED,
+                    )
+            except Interrupted:
+                shutil.rmtree(candidate, ignore_errors=True)
+                return None
             row = eval_row(res, steps, wall_offset + time.perf_counter() - start)
             curve.append(row)
             board.scalars(
@@ -244,6 +267,13 @@ def train_rllib(
             return row
 
         with stop.installed():
+            rows = curve.rows()
+            if continuing and (steps // config.eval_freq) * config.eval_freq > (
+                rows[-1]["timesteps"] if rows else 0
+            ):
+                # Due before the checkpoint this run goes on from, and never written (a signal
+                # stopped it half-way): the policy is the checkpoint's still.
+                run_eval()
             while steps < config.timesteps and stop.signum is None:
                 result = algo.train()
                 runners = result.get("env_runners", {})
@@ -282,6 +312,8 @@ def train_rllib(
                     next_eval = (steps // config.eval_freq + 1) * config.eval_freq
                     row = run_eval()
                     target = config.target_success
+                    if row is None:  # a signal ended the evaluation
+                        break
                     if target is not None and row["success_rate"] >= target:
                         reached = row
                         break

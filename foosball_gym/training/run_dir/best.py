@@ -8,7 +8,20 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.training.run_dir.files import BEST_DIR, BEST_RECORD, atomic_write_text
+from foosball_gym.training.run_dir.files import BEST_DIR, BEST_RECORD, atomic_write_text, read_json
+
+
+def read_best(run: Path) -> dict[str, Any] | None:
+    """The row of ``eval.csv`` that earned the run's ``best/`` (None: no best yet); ValueError
+    in one line where ``best.json`` is damaged."""
+    record = Path(run) / BEST_DIR / BEST_RECORD
+    if not record.exists():
+        return None
+    row = read_json(record, dict, "the evaluation that earned the best model")
+    for key in ("success_rate", "timesteps"):
+        if not isinstance(row.get(key), int | float) or isinstance(row.get(key), bool):
+            raise ValueError(f"{record}: {key} must be a number, got {row.get(key)!r}")
+    return row
 
 
 class BestModel:
@@ -18,9 +31,8 @@ class BestModel:
     def __init__(self, run: Path) -> None:
         self.dir = Path(run) / BEST_DIR
         self.record = self.dir / BEST_RECORD
-        self.success_rate = (
-            json.loads(self.record.read_text())["success_rate"] if self.record.exists() else -1.0
-        )
+        best = read_best(run)
+        self.success_rate = -1.0 if best is None else float(best["success_rate"])
 
     def offer(self, row: Mapping[str, Any], save: Callable[[Path], None]) -> bool:
         """Keep the model evaluated in ``row`` where it did at least as well as the best so

@@ -7,11 +7,12 @@ Each row is one evaluation of the policy of the moment on the same seeded episod
 from __future__ import annotations
 
 import csv
-from collections.abc import Mapping
+import io
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.training.run_dir.files import EVAL_CSV, EVAL_PNG
+from foosball_gym.training.run_dir.files import EVAL_CSV, EVAL_PNG, append_text, write_bytes
 
 # The first seed of every evaluation's episodes.
 EVAL_SEED = 1_000_000
@@ -62,23 +63,57 @@ class EvalCurve:
         return rows[-1]["wall_seconds"] if rows else 0.0
 
     def append(self, row: Mapping[str, Any]) -> None:
-        """Add ``row`` to ``eval.csv`` and draw ``eval.png`` again (where matplotlib is
-        installed: the CSV is the record)."""
-        new = not self.csv.exists()
-        with self.csv.open("a", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=EVAL_FIELDS)
-            if new:
-                writer.writeheader()
-            writer.writerow(row)
+        """Add ``row`` to ``eval.csv`` (all of it or, where the disk is full, none of it) and
+        draw ``eval.png`` again (where matplotlib is installed: the CSV is the record)."""
+        append_text(self.csv, csv_text([row], header=not self.csv.exists()))
         try:
             plot_curve(self.csv, self.png, self.title)
         except ImportError:
             pass
 
+    def cut(self, timesteps: int) -> list[dict[str, float]]:
+        """Remove the rows after ``timesteps`` (a branch of the run that was lost), and
+        return them."""
+        rows = self.rows()
+        kept = [r for r in rows if r["timesteps"] <= timesteps]
+        if len(kept) < len(rows):
+            write_bytes(self.csv, csv_text(kept, header=True).encode())
+        return [r for r in rows if r["timesteps"] > timesteps]
+
+
+def csv_text(rows: Sequence[Mapping[str, Any]], header: bool) -> str:
+    """``rows`` as lines of ``eval.csv`` (its header first with ``header``)."""
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=EVAL_FIELDS, lineterminator="\n")
+    if header:
+        writer.writeheader()
+    for row in rows:
+        writer.writerow({k: _plain(v) for k, v in row.items()})
+    return out.getvalue()
+
+
+def _plain(value: Any) -> Any:
+    # Rows read back are floats; the whole numbers among them are written as they were.
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
 
 def read_curve(csv_path: Path) -> list[dict[str, float]]:
+    """The rows of ``eval.csv`` as numbers; ValueError naming the file and the row where it
+    is damaged."""
     with Path(csv_path).open() as f:
-        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+        reader = csv.DictReader(f)
+        if reader.fieldnames is None:
+            return []
+        missing = [k for k in ("timesteps", "wall_seconds") if k not in reader.fieldnames]
+        if missing:
+            raise ValueError(f"{csv_path} is not an evaluation curve: it has no {missing[0]}")
+        rows = []
+        for line, row in enumerate(reader, start=2):
+            try:
+                rows.append({k: float(v) for k, v in row.items() if k is not None})
+            except (TypeError, ValueError):
+                raise ValueError(f"{csv_path}, line {line}: not a row of numbers") from None
+        return rows
 
 
 def plot_curve(csv_path: Path, png_path: Path, title: str) -> None:
@@ -104,7 +139,7 @@ def plot_curve(csv_path: Path, png_path: Path, title: str) -> None:
     ax2.set_xlabel("timesteps")
     ax2.grid(alpha=0.3)
     fig.tight_layout()
-    tmp = png_path.with_name(png_path.name + ".tmp.png")
-    fig.savefig(tmp, dpi=100)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=100)
     plt.close(fig)
-    tmp.replace(png_path)
+    write_bytes(png_path, buffer.getvalue())

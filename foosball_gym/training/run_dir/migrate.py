@@ -19,6 +19,7 @@ from foosball_gym.training.run_dir.files import (
     read_latest,
     write_latest,
 )
+from foosball_gym.training.run_dir.lock import run_lock
 from foosball_gym.training.run_dir.storage import SERIALIZED, load_pickled_norm, strip_pickles
 
 
@@ -47,7 +48,8 @@ def migrate_run(run: str | Path, trust: bool = False) -> list[Path]:
         The files written, in the order they were.
 
     Raises:
-        ValueError: ``trust`` is False, or ``run`` is not a directory.
+        ValueError: ``trust`` is False, ``run`` is not a directory, or a training is writing
+            it (:class:`~foosball_gym.training.run_dir.lock.RunInUseError`).
     """
     run = Path(run)
     if not trust:
@@ -57,6 +59,11 @@ def migrate_run(run: str | Path, trust: bool = False) -> list[Path]:
         )
     if not run.is_dir():
         raise ValueError(f"{run} is not a run directory")
+    with run_lock(run):  # not while a training writes it
+        return _migrate(run)
+
+
+def _migrate(run: Path) -> list[Path]:
     written: list[Path] = []
     for legacy in sorted(run.rglob(f"*{LEGACY_NORM_FILE}")):
         target = legacy.with_name(legacy.name[: -len(LEGACY_NORM_FILE)] + NORM_FILE)

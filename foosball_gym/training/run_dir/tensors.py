@@ -6,11 +6,15 @@ RLlib backend's checkpoints and self-play snapshots need no trust to be read.
 
 from __future__ import annotations
 
+import io
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from foosball_gym.training.run_dir.files import write_bytes
+from foosball_gym.training.run_dir.storage import check_torch_file
 
 
 def _to_tensors(value: Any) -> Any:
@@ -46,13 +50,15 @@ def save_tensors(value: Any, path: Path) -> None:
     """Write ``value`` (mappings and lists of arrays and numbers) atomically."""
     import torch as th
 
-    tmp = path.with_name(path.name + ".tmp")
-    th.save(_to_tensors(value), tmp)
-    tmp.replace(path)
+    buffer = io.BytesIO()
+    th.save(_to_tensors(value), buffer)
+    write_bytes(path, buffer.getvalue())
 
 
 def load_tensors(path: Path) -> Any:
-    """What :func:`save_tensors` wrote, its tensors as numpy arrays."""
+    """What :func:`save_tensors` wrote, its tensors as numpy arrays (refused, ValueError,
+    where it says it inflates past :data:`~.storage.MODEL_SIZE_LIMIT`)."""
     import torch as th
 
+    check_torch_file(path)
     return _to_arrays(th.load(path, map_location="cpu", weights_only=True))

@@ -3,6 +3,7 @@ checkpoints, and its stop on a signal."""
 
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 from typing import Any
@@ -14,38 +15,53 @@ from foosball_gym.training.config import TrainConfig
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
 from foosball_gym.training.run_dir.best import BestModel
 from foosball_gym.training.run_dir.curve import EVAL_SEED, EvalCurve, eval_row
-from foosball_gym.training.run_dir.files import (
-    CHECKPOINT_DIR,
-    MODEL_FILE,
-    NORM_FILE,
-    write_latest,
-)
+from foosball_gym.training.run_dir.files import CHECKPOINT_DIR, MODEL_FILE, write_latest
 from foosball_gym.training.run_dir.storage import save_model
-from foosball_gym.training.signals import SignalStop
+from foosball_gym.training.signals import Interrupted, SignalStop
 
 
 class EvalCurveCallback(BaseCallback):
     """Every ``eval_freq`` steps: evaluate on seeded episodes, add the row to eval.csv and its
-    plot, and keep the best model so far in ``best/``."""
+    plot, and keep the best model so far in ``best/``.
 
-    def __init__(self, config: TrainConfig, out: Path, wall_offset: float = 0.0) -> None:
+    With ``stop``, the run's :class:`StopOnSignal`, a signal ends an evaluation where it lands
+    (no row is written) and the run with it; the run resumed, the evaluation it missed is the
+    first thing it does.
+    """
+
+    def __init__(
+        self,
+        config: TrainConfig,
+        out: Path,
+        wall_offset: float = 0.0,
+        stop: SignalStop | None = None,
+    ) -> None:
         super().__init__()
         self.config = config
         self.curve = EvalCurve(out, config.env_id)
         self.best = BestModel(out)
         self.wall_offset = wall_offset
+        self.stop = stop
         self._start = time.perf_counter()
         self._next = 0
         self.reached: dict[str, Any] | None = None
+        self._going_on = True
 
     def _on_training_start(self) -> None:
         self._start = time.perf_counter()
-        self._next = (self.num_timesteps // self.config.eval_freq + 1) * self.config.eval_freq
+        every = self.config.eval_freq
+        self._next = (self.num_timesteps // every + 1) * every
+        rows = self.curve.rows()
+        last = rows[-1]["timesteps"] if rows else 0
+        if self.num_timesteps and (self.num_timesteps // every) * every > last:
+            # Due before the checkpoint this run goes on from, and never written (a signal
+            # stopped it half-way): the model is the checkpoint's still.
+            self._going_on = self.run_eval()
 
     def _on_step(self) -> bool:
-        if self.num_timesteps < self._next:
-            return True
-        self._next += self.config.eval_freq
+        if not self._going_on or self.num_timesteps < self._next:
+            return self._going_on
+        self._next = (self.num_timesteps // self.config.eval_freq + 1) * self.config.eval_freq
         return self.run_eval()
 
     def pause_clock(self, seconds: float) -> None:
@@ -54,13 +70,17 @@ class EvalCurveCallback(BaseCallback):
         self._start += seconds
 
     def run_eval(self) -> bool:
-        res = evaluate(
-            PolicySnapshot.of_model(self.model),
-            self.config.env_id,
-            self.config.env_kwargs,
-            episodes=self.config.eval_episodes,
-            seed=EVAL_SEED,
-        )
+        try:
+            with self.stop.interruptible() if self.stop else contextlib.nullcontext():
+                res = evaluate(
+                    PolicySnapshot.of_model(self.model),
+                    self.config.env_id,
+                    self.config.env_kwargs,
+                    episodes=self.config.eval_episodes,
+                    seed=EVAL_SEED,
+                )
+        except Interrupted:
+            return False
         wall = self.wall_offset + time.perf_counter() - self._start
         row = eval_row(res, self.num_timesteps, wall)
         self.curve.append(row)
@@ -74,11 +94,12 @@ class EvalCurveCallback(BaseCallback):
         return True
 
     def _save_best(self, best: Path) -> None:
-        save_model(self.model, best / MODEL_FILE, best / NORM_FILE)
+        save_model(self.model, best / MODEL_FILE)
 
 
 class CheckpointCallback(BaseCallback):
-    """Every ``every`` steps write model, normalisation and a pointer to them, atomically."""
+    """Every ``every`` steps write the model with its normalisation, then a pointer to it,
+    each atomically."""
 
     def __init__(self, out: Path, every: int) -> None:
         super().__init__()
@@ -100,11 +121,8 @@ class CheckpointCallback(BaseCallback):
     def write(self) -> None:
         self.dir.mkdir(parents=True, exist_ok=True)
         name = f"model_{self.num_timesteps:010d}"
-        save_model(self.model, self.dir / f"{name}.zip", self.dir / f"{name}_{NORM_FILE}")
-        pointer = {"model": f"{name}.zip", "timesteps": int(self.num_timesteps)}
-        if self.model.get_vec_normalize_env() is not None:
-            pointer["vecnormalize"] = f"{name}_{NORM_FILE}"
-        write_latest(self.out, pointer)
+        save_model(self.model, self.dir / f"{name}.zip")
+        write_latest(self.out, {"model": f"{name}.zip", "timesteps": int(self.num_timesteps)})
 
 
 class StopOnSignal(SignalStop, BaseCallback):

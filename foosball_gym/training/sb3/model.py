@@ -12,13 +12,20 @@ from stable_baselines3.common.vec_env import VecNormalize
 from foosball_gym.training.config import ALGORITHMS, TrainConfig
 from foosball_gym.training.run_dir.files import (
     CHECKPOINT_DIR,
+    CONFIG_FILE,
     LEGACY_NORM_FILE,
     MODEL_FILE,
     NORM_FILE,
     TB_DIR,
     read_latest,
 )
-from foosball_gym.training.run_dir.storage import read_model_zip, read_norm
+from foosball_gym.training.run_dir.storage import (
+    NormStats,
+    read_model_zip,
+    read_norm,
+    statistics_beside,
+    zip_statistics,
+)
 
 ALGOS = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
 
@@ -60,25 +67,42 @@ def load_checkpoint(config: TrainConfig, out: Path, venv: Any) -> tuple[Any, int
     """The model of the run's last checkpoint (or its final model), and its timesteps.
 
     The model is built from the run's configuration and given the checkpoint's weights and
-    optimiser state, read as tensors, so nothing is unpickled. A checkpoint of a run from
-    before (with ``vecnormalize.pkl``) is refused, with how to migrate it.
+    optimiser state, read as tensors, so nothing is unpickled; ``venv``'s normalisation is
+    given the statistics the checkpoint holds (a checkpoint from before they went into the
+    zip: those beside it). A checkpoint of a run from before plain files (with
+    ``vecnormalize.pkl``) is refused, with how to migrate it; so is one whose statistics are
+    missing, damaged or do not fit the run's configuration.
     """
     pointer = read_latest(out)
     if pointer is not None:
-        zip_path = out / CHECKPOINT_DIR / pointer["model"]
-        norm_path = (
-            out / CHECKPOINT_DIR / pointer["vecnormalize"] if "vecnormalize" in pointer else None
-        )
+        zip_path = out / CHECKPOINT_DIR / str(pointer.get("model", ""))
+        named = pointer.get("vecnormalize")
+        beside = [out / CHECKPOINT_DIR / named] if named else []
     else:
         zip_path = out / MODEL_FILE
-        found = [out / n for n in (NORM_FILE, LEGACY_NORM_FILE) if (out / n).exists()]
-        norm_path = found[0] if found else None
-    if norm_path is not None and isinstance(venv, VecNormalize):
-        read_norm(norm_path, out, trust=False).apply(venv)
+        beside = [out / NORM_FILE, out / LEGACY_NORM_FILE]
+    if not zip_path.is_file():
+        raise ValueError(f"cannot resume {out}: its checkpoint {zip_path} is missing")
     try:
+        stats = _statistics(zip_path, beside, out)
         data, params, variables = read_model_zip(zip_path)
     except ValueError as err:
         raise ValueError(f"cannot resume from {zip_path}: {err}") from None
+    normalised = isinstance(venv, VecNormalize)
+    if normalised != (stats is not None):
+        raise ValueError(
+            f"cannot resume from {zip_path}: the run's {CONFIG_FILE} "
+            + (
+                "normalises observations, but the checkpoint holds no statistics"
+                if normalised
+                else "does not normalise observations, but the checkpoint holds statistics"
+            )
+        )
+    if stats is not None:
+        try:
+            stats.apply(venv)
+        except ValueError as err:
+            raise ValueError(f"cannot resume from {zip_path}: {err}") from None
     model = build_model(config, venv, out / TB_DIR)
     try:
         model.set_parameters(params, exact_match=True, device="cpu")
@@ -91,3 +115,13 @@ def load_checkpoint(config: TrainConfig, out: Path, venv: Any) -> tuple[Any, int
     model.num_timesteps = steps
     model._n_updates = int(data.get("_n_updates", 0))
     return model, steps
+
+
+def _statistics(zip_path: Path, beside: list[Path], out: Path) -> NormStats | None:
+    """The statistics of the model in ``zip_path``: its own, or for a zip from before they
+    went into it, the first file of ``beside`` (or the one its name gives) that exists."""
+    recorded, stats = zip_statistics(zip_path)
+    if recorded:
+        return stats
+    found = [p for p in [*beside, *statistics_beside(zip_path)] if p.exists()]
+    return read_norm(found[0], out, trust=False) if found else None

@@ -18,17 +18,18 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from foosball_gym.table import PHYSICS_REVISION
 from foosball_gym.training.config import TrainConfig
+from foosball_gym.training.resume import set_aside_after
 from foosball_gym.training.run_dir.curve import EvalCurve
 from foosball_gym.training.run_dir.files import (
     CONFIG_FILE,
     MODEL_FILE,
-    NORM_FILE,
     SELFPLAY_DIR,
     TB_DIR,
     atomic_write_text,
     clear_stale,
     has_checkpoint,
 )
+from foosball_gym.training.run_dir.lock import run_lock
 from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning, physics_mismatch
 from foosball_gym.training.run_dir.storage import save_model
 from foosball_gym.training.sb3.callbacks import CheckpointCallback, EvalCurveCallback, StopOnSignal
@@ -96,7 +97,12 @@ def train(
     there, and ``resume`` starts it over from its configuration.
 
     SIGINT (Ctrl-C) or SIGTERM during training end it at the next step with a checkpoint
-    written; the result's ``signal`` says which arrived.
+    written (during an evaluation, where it lands: the resumed run makes the evaluation
+    first); the result's ``signal`` says which arrived.
+
+    The run's lock (:mod:`~foosball_gym.training.run_dir.lock`) is held throughout: a second
+    training into ``out`` meanwhile is refused. A resume sets aside, into ``lost/``, what the
+    run recorded after the checkpoint it goes on from (:mod:`~foosball_gym.training.resume`).
 
     Args:
         config: the run's configuration (ignored with ``resume``: the run's own is read).
@@ -107,10 +113,19 @@ def train(
         timesteps: with ``resume``, train on to this many steps in all, past the run's own
             ``timesteps`` (written into its ``config.json``), so that a long run can go on
             over several sittings.
+
+    Raises:
+        ValueError: the configuration, or a file of the run, is refused (the message says
+            which and why), or another training holds the run
+            (:class:`~foosball_gym.training.run_dir.lock.RunInUseError`).
+        OSError: the run's storage failed (full, read-only); the error names the file, and
+            no temporary file is left.
     """
     out = Path(out)
     if timesteps is not None and not resume:
         raise ValueError("timesteps extends a resumed run; a new run takes config.timesteps")
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out} is a file, not a run directory")
     if resume:
         config = TrainConfig.load(out / CONFIG_FILE)
         if timesteps is not None:
@@ -123,26 +138,43 @@ def train(
                 PhysicsMismatchWarning,
                 stacklevel=2,
             )
-    config.check()
-    if timesteps is not None:
-        # Only once the lengthened configuration is known to be sound.
-        _record_extension(config, out)
+    try:
+        config.check()
+    except (ValueError, TypeError) as err:
+        if not resume:
+            raise
+        # A value the run's own file holds: say which file.
+        kind = ValueError if isinstance(err, ValueError) else TypeError
+        raise kind(f"{out / CONFIG_FILE}: {err}") from None
     th.set_num_threads(config.torch_threads)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"{out} is a file, not a run directory")
-    continuing = resume and has_checkpoint(out)
-    if not resume and has_checkpoint(out):
-        raise ValueError(
-            f"{out} already holds a run; use --resume to continue it or choose another --out"
-        )
-    out.mkdir(parents=True, exist_ok=True)
+    # Everything written into the run from here is written by this training alone.
+    with run_lock(out):
+        continuing = resume and has_checkpoint(out)
+        if not resume and has_checkpoint(out):
+            raise ValueError(
+                f"{out} already holds a run; use --resume to continue it or choose another --out"
+            )
+        return _train(config, out, continuing, progress_bar, callbacks, timesteps is not None)
 
+
+def _train(
+    config: TrainConfig,
+    out: Path,
+    continuing: bool,
+    progress_bar: bool,
+    callbacks: list[BaseCallback] | None,
+    extended: bool,
+) -> TrainResult:
     venv = make_env(config)
     done_steps, wall_offset = 0, 0.0
     try:
         if continuing:
             model, done_steps = load_checkpoint(config, out, venv)
+            set_aside_after(out, done_steps, config.env_id)
             wall_offset = EvalCurve(out, config.env_id).wall_seconds()
+            if extended:
+                # Only once the lengthened run is known to go on from its checkpoint.
+                _record_extension(config, out)
         else:
             model = build_model(config, venv, out / TB_DIR)
             clear_stale(out)
@@ -178,6 +210,7 @@ def train(
                     if config.selfplay_gate
                     else None
                 ),
+                stop=stop,
             )
         )
     if config.teacher_steps:
@@ -190,10 +223,10 @@ def train(
                 teacher=config.teacher,
             )
         )
-    evaluations = EvalCurveCallback(config, out, wall_offset)
+    evaluations = EvalCurveCallback(config, out, wall_offset, stop=stop)
     own.append(evaluations)
     if config.video_every is not None:
-        own.append(VideoCallback(config, out, evaluations))
+        own.append(VideoCallback(config, out, evaluations, stop=stop))
 
     start = time.perf_counter()
     remaining = max(config.timesteps - done_steps, 0)
@@ -219,7 +252,7 @@ def train(
         ):
             evaluations.init_callback(model)  # a last point for the curve at the final timestep
             evaluations.run_eval()
-        save_model(model, out / MODEL_FILE, out / NORM_FILE)
+        save_model(model, out / MODEL_FILE)
     finally:
         venv.close()
     return TrainResult(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import random
 import time
 from collections.abc import Iterator
@@ -18,6 +19,7 @@ from foosball_gym.training.config import TrainConfig
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
 from foosball_gym.training.run_dir.files import VIDEO_DIR
 from foosball_gym.training.sb3.callbacks import EvalCurveCallback
+from foosball_gym.training.signals import Interrupted, SignalStop
 
 # Apart from the evaluations' seeds (1_000_000 on), and the same for every clip of a run, so
 # that its clips show the same episodes played better and better.
@@ -65,9 +67,14 @@ class VideoCallback(BaseCallback):
     """
 
     def __init__(
-        self, config: TrainConfig, out: Path, curve: EvalCurveCallback | None = None
+        self,
+        config: TrainConfig,
+        out: Path,
+        curve: EvalCurveCallback | None = None,
+        stop: SignalStop | None = None,
     ) -> None:
         super().__init__()
+        self.stop = stop
         if config.video_every is None:
             raise ValueError("VideoCallback needs config.video_every")
         self.config = config
@@ -82,29 +89,37 @@ class VideoCallback(BaseCallback):
     def _on_step(self) -> bool:
         if self.num_timesteps >= self._next:
             self._next += self.every
-            self.record()
+            try:
+                self.record()
+            except Interrupted:
+                return False  # a signal, during the clip: the run stops, without it
         return True
 
     def record(self) -> Path:
-        """Write the clip of the policy now; its path."""
+        """Write the clip of the policy now; its path. A signal during it (with ``stop``)
+        raises :class:`~foosball_gym.training.signals.Interrupted`, the clip unwritten."""
         start = time.perf_counter()
         self.dir.mkdir(parents=True, exist_ok=True)
         path = self.dir / f"step_{self.num_timesteps:09d}.mp4"
         # The writer picks the container by the suffix: the temporary name keeps it.
         tmp = path.with_name(path.stem + ".tmp.mp4")
         episodes = clip_episodes(self.config.env_id)
-        with _global_rng_kept():
-            evaluate(
-                PolicySnapshot.of_model(self.model),
-                self.config.env_id,
-                self.config.env_kwargs,
-                episodes=episodes,
-                seed=VIDEO_SEED,
-                video=tmp,
-                video_episodes=episodes,
-                video_stride=VIDEO_STRIDE,
-            )
-        tmp.replace(path)
+        interruptible = self.stop.interruptible() if self.stop else contextlib.nullcontext()
+        try:
+            with _global_rng_kept(), interruptible:
+                evaluate(
+                    PolicySnapshot.of_model(self.model),
+                    self.config.env_id,
+                    self.config.env_kwargs,
+                    episodes=episodes,
+                    seed=VIDEO_SEED,
+                    video=tmp,
+                    video_episodes=episodes,
+                    video_stride=VIDEO_STRIDE,
+                )
+            tmp.replace(path)
+        finally:
+            tmp.unlink(missing_ok=True)
         if self.curve is not None:
             self.curve.pause_clock(time.perf_counter() - start)
         return path

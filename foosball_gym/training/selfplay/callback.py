@@ -8,6 +8,7 @@ logger and saves every snapshot, so a run can be resumed and its history inspect
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections import deque
 from pathlib import Path
@@ -15,18 +16,19 @@ from pathlib import Path
 from stable_baselines3.common.callbacks import BaseCallback
 
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
-from foosball_gym.training.run_dir.files import NORM_FILE
+from foosball_gym.training.run_dir.files import append_text
 from foosball_gym.training.run_dir.storage import save_model
 from foosball_gym.training.selfplay.gate import ReplacementGate
-from foosball_gym.training.selfplay.history import SnapshotHistory, snapshot_file
+from foosball_gym.training.selfplay.history import GATE_LOG, SnapshotHistory, snapshot_file
 from foosball_gym.training.selfplay.opponents import (
     AGAINST_ANCHOR,
     SelfPlayVecEnv,
     find_selfplay_env,
 )
 from foosball_gym.training.selfplay.rule import ReplacementRule, game_result
+from foosball_gym.training.signals import Interrupted, SignalStop
 
-GATE_LOG = "gate.jsonl"
+__all__ = ["GATE_LOG", "SelfPlayCallback"]
 
 
 class SelfPlayCallback(BaseCallback):
@@ -53,6 +55,8 @@ class SelfPlayCallback(BaseCallback):
             verdict is appended to ``gate.jsonl`` and each generation that passed is also
             saved as a model, ``generation_<generation>.zip`` with its normalisation, which
             ``foosball eval`` and ``load_policy`` read like any model.
+        stop: the run's signal stop: a signal during the gate's games ends them (and the
+            run) where it lands, the replacement not judged.
 
     TensorBoard gets the window's rates and ``selfplay/elo``, the learner's rating against its
     opponents (see :class:`~foosball_gym.training.selfplay.rule.ReplacementRule`). Games
@@ -71,8 +75,10 @@ class SelfPlayCallback(BaseCallback):
         rule: str = "win_rate",
         sampled: bool = False,
         gate: ReplacementGate | None = None,
+        stop: SignalStop | None = None,
     ) -> None:
         super().__init__(verbose)
+        self.stop = stop
         if pool_size < 1:
             raise ValueError(f"pool_size must be at least 1, got {pool_size}")
         self.judge = ReplacementRule(rule, threshold, window)
@@ -107,7 +113,11 @@ class SelfPlayCallback(BaseCallback):
                 self._anchor_goals.append((info.get("goals_for", 0), info.get("goals_against", 0)))
             elif done:
                 replaced = self.judge.record(game_result(info))
-                if replaced is not None and self._gate_passes():
+                try:
+                    passed = replaced is not None and self._gate_passes()
+                except Interrupted:
+                    return False
+                if replaced is not None and passed:
                     self._add_snapshot(*replaced)
                     assert self._env is not None  # set as training starts
                     self._env.set_pool(self.pool)
@@ -130,7 +140,8 @@ class SelfPlayCallback(BaseCallback):
         if self.gate is None:
             return True
         learner = PolicySnapshot.of_model(self.model, deterministic=True)
-        verdict = self.gate.judge(learner, self.pool[-1], self.num_timesteps)
+        with self.stop.interruptible() if self.stop else contextlib.nullcontext():
+            verdict = self.gate.judge(learner, self.pool[-1], self.num_timesteps)
         self.logger.record("selfplay/gate_passed", int(verdict.passed))
         if self.verbose:
             print(
@@ -143,8 +154,8 @@ class SelfPlayCallback(BaseCallback):
             )
         if self.save_dir is not None:
             self.save_dir.mkdir(parents=True, exist_ok=True)
-            with open(self.save_dir / GATE_LOG, "a") as log:
-                log.write(json.dumps({"generation": self.generation, **verdict.record()}) + "\n")
+            line = json.dumps({"generation": self.generation, **verdict.record()}) + "\n"
+            append_text(self.save_dir / GATE_LOG, line)
         return verdict.passed
 
     def _on_training_end(self) -> None:
@@ -166,12 +177,7 @@ class SelfPlayCallback(BaseCallback):
             self.save_dir.mkdir(parents=True, exist_ok=True)
             snap.save(snapshot_file(self.save_dir, generation))
             if self.gate is not None:
-                name = f"generation_{generation:04d}"
-                save_model(
-                    self.model,
-                    self.save_dir / f"{name}.zip",
-                    self.save_dir / f"{name}_{NORM_FILE}",
-                )
+                save_model(self.model, self.save_dir / f"generation_{generation:04d}.zip")
         # After the snapshot's files: a history never names a snapshot that is not there.
         self.history.add(
             generation, self.num_timesteps, score, elo, [p.generation for p in self.pool]

@@ -10,18 +10,79 @@ neither PyTorch nor either learning library.
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from foosball_gym.training.run_dir.files import HISTORY_FILE, atomic_write_text
+from foosball_gym.training.run_dir.files import HISTORY_FILE, atomic_write_text, read_json
 from foosball_gym.training.selfplay.rule import ReplacementRule
+
+# What self-play's gate writes: its verdicts, and the generations that passed as models.
+GATE_LOG = "gate.jsonl"
 
 
 def snapshot_file(save_dir: Path, generation: int) -> Path:
     """Where the snapshot of ``generation`` is saved in ``save_dir``."""
     return save_dir / f"opponent_{generation:04d}.pt"
+
+
+def generation_files(save_dir: Path, generation: int) -> list[Path]:
+    """The files of ``generation`` in ``save_dir`` (its snapshot, and the model the gate
+    saved where it passed one), those that are there."""
+    name = f"generation_{generation:04d}"
+    candidates = [snapshot_file(save_dir, generation), save_dir / f"{name}.zip"]
+    candidates.append(save_dir / f"{name}_vecnormalize.json")
+    return [c for c in candidates if c.exists()]
+
+
+def read_history(path: Path) -> list[dict[str, Any]]:
+    """A run's ``history.json``: one record per snapshot, oldest first; ValueError in one line
+    where it is damaged."""
+    records = read_json(path, list, "the run's snapshots, one record each")
+    before = -1
+    for k, record in enumerate(records):
+        if not isinstance(record, dict):
+            raise ValueError(f"{path}: record {k} is a {type(record).__name__}, not an object")
+        for key in ("generation", "timesteps", "games"):
+            value = record.get(key)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+                raise ValueError(
+                    f"{path}: record {k}'s {key} must be a whole number, 0 or more, got {value!r}"
+                )
+        if record["generation"] <= before:
+            raise ValueError(f"{path}: the generations must rise, record by record")
+        before = record["generation"]
+    return records
+
+
+def set_aside_generations(save_dir: Path, timesteps: int, lost: Path) -> int:
+    """Move the records, snapshots and gate verdicts of the generations made after
+    ``timesteps`` (on a branch of the run that was lost) from ``save_dir`` into ``lost``;
+    how many generations that was."""
+    path = save_dir / HISTORY_FILE
+    if not path.exists():
+        return 0
+    records = read_history(path)
+    kept = [r for r in records if r["timesteps"] <= timesteps]
+    gone = records[len(kept) :]
+    if not gone:
+        return 0
+    lost.mkdir(parents=True, exist_ok=True)
+    for record in gone:
+        for file in generation_files(save_dir, record["generation"]):
+            shutil.move(file, lost / file.name)
+    atomic_write_text(lost / HISTORY_FILE, json.dumps(gone, indent=1))
+    gate = save_dir / GATE_LOG
+    if gate.exists():
+        lines = gate.read_text().splitlines(keepends=True)
+        late = [line for line in lines if _verdict_steps(line, gate) > timesteps]
+        if late:
+            atomic_write_text(lost / GATE_LOG, "".join(late))
+            atomic_write_text(gate, "".join(line for line in lines if line not in late))
+    atomic_write_text(path, json.dumps(kept, indent=1))
+    return len(gone)
 
 
 def history_record(
@@ -50,6 +111,16 @@ def restored_elo(history: list[dict[str, Any]], generations: list[int]) -> float
     return float(np.mean([by_generation.get(g, 0.0) for g in generations]))
 
 
+def _verdict_steps(line: str, gate: Path) -> int:
+    try:
+        steps = json.loads(line)["timesteps"]
+    except (json.JSONDecodeError, KeyError, TypeError):
+        steps = None
+    if not isinstance(steps, int):
+        raise ValueError(f"{gate} is damaged: a line is not a verdict with its timesteps")
+    return steps
+
+
 class SnapshotHistory:
     """The records of a run's snapshots, kept with the replacement rule that judges them.
 
@@ -74,7 +145,9 @@ class SnapshotHistory:
         """Read ``history.json``: the generations of the pool, oldest first. The rule counts
         on from the games played so far and rates the pool as it was rated."""
         assert self.save_dir is not None
-        self.records = json.loads((self.save_dir / HISTORY_FILE).read_text())
+        self.records = read_history(self.save_dir / HISTORY_FILE)
+        if not self.records:
+            raise ValueError(f"{self.save_dir / HISTORY_FILE} holds no generation")
         pool = [h["generation"] for h in self.records][-self.pool_size :]
         self.rule.games = self.records[-1]["games"]
         self.rule.opponent_elo = restored_elo(self.records, pool)

@@ -29,9 +29,10 @@ from foosball_gym.training.run_dir.files import (
     RLLIB_BACKEND,
     SELFPLAY_DIR,
     atomic_write_text,
+    read_json,
     read_latest,
 )
-from foosball_gym.training.selfplay.history import snapshot_file
+from foosball_gym.training.selfplay.history import read_history, snapshot_file
 from foosball_gym.training.selfplay.matches import Arena, PairResult, Player, play_pair
 
 SCRIPTED = "scripted"
@@ -200,7 +201,12 @@ def read_run(run_dir: str | Path) -> dict[str, Any]:
             f"{run_dir} has no self-play generations ({SELFPLAY_DIR}/history.json is "
             "missing): a league needs a run trained with self-play"
         )
-    return json.loads(config_path.read_text())
+    config = read_json(config_path, dict, "a run's configuration")
+    if not isinstance(config.get("env_id"), str) or not isinstance(
+        config.get("env_kwargs", {}), dict
+    ):
+        raise ValueError(f"{config_path} is damaged: it needs an env_id and env_kwargs (an object)")
+    return config
 
 
 def pick_generations(generations: Sequence[int], most: int | None) -> list[int]:
@@ -240,7 +246,7 @@ def run_players(
             f"{run_dir} was trained with the rllib backend, whose snapshots act on their mean "
             "only; rate it without sampling"
         )
-    history = json.loads((run_dir / SELFPLAY_DIR / HISTORY_FILE).read_text())
+    history = read_history(run_dir / SELFPLAY_DIR / HISTORY_FILE)
     by_generation = {h["generation"]: h for h in history}
     players = []
     for g in pick_generations(list(by_generation), most_generations):
