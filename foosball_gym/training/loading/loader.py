@@ -291,3 +291,33 @@ def _find_norm(zip_path: Path, run_dir: Path) -> Path | None:
 
 
 NORM_NAMES = (NORM_FILE, LEGACY_NORM_FILE)
+
+
+def whole_action_policy(
+    policy: Any, env_id: str, env_kwargs: dict[str, Any]
+) -> tuple[Any, dict[str, Any]]:
+    """``policy`` (a snapshot of a model trained on ``env_id`` with ``env_kwargs``) as a
+    player that gives the whole action, and the options of an environment that takes it.
+
+    A model trained with the option ``residual`` gives corrections to the scripted baseline:
+    wherever it plays as an opponent, or in a game whose environment must take both sides'
+    whole actions (self-play's opponents, a gate, a league), it plays as the baseline plus its
+    correction, and the environment is made without ``residual``. Any other policy is
+    returned as it is, with the options unchanged.
+    """
+    options = dict(env_kwargs)
+    residual = float(options.pop("residual", 0.0) or 0.0)
+    if not residual:
+        return policy, dict(env_kwargs)
+    from foosball_gym.registration import scripted_policy
+
+    baseline = scripted_policy(env_id, options)
+    player = LoadedPolicy(
+        policy=policy,
+        env_id=env_id,
+        env_kwargs=options,
+        source=f"a residual policy of {env_id}",
+        trained_residual=residual,
+        baseline=baseline,
+    )
+    return player, options
