@@ -33,6 +33,11 @@ def check_rllib_config(config: TrainConfig, num_workers: int) -> None:
             "the rllib backend plays snapshots only; leave selfplay_scripted_share at 0, or "
             "train with --backend sb3"
         )
+    if config.env_kwargs.get("residual"):
+        raise ValueError(
+            "the rllib backend's snapshots would play their bare corrections as the opponent; "
+            "train a residual policy (the environment option residual) with --backend sb3"
+        )
     if config.selfplay_sampled:
         raise ValueError(
             "the rllib backend's snapshots act on their policy's mean; leave selfplay_sampled "
