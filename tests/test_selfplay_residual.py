@@ -170,3 +170,18 @@ def test_a_league_of_a_residual_run_plays_its_generations_with_their_baseline(tm
         np.testing.assert_allclose(player.policy(obs), expected, atol=1e-6)
     assert main(["league", str(run), "--games", "2", "--out", str(tmp_path)]) == 0
     assert "residual" not in json.loads((tmp_path / "league.json").read_text())["env_kwargs"]
+
+
+def test_a_policy_trained_with_a_scale_for_each_joint_plays_the_whole_action():
+    from foosball_gym.training.loading.loader import whole_action_policy
+
+    scales = [0.5, 0.0]
+    player, options = whole_action_policy(constant(CORRECTION), ENV, {**SHORT, "residual": scales})
+    assert options == SHORT
+    env = gym.make(ENV, **SHORT)
+    obs, _ = env.reset(seed=1)
+    baseline = env.unwrapped.scripted_policy()
+    env.close()
+    expected = np.clip(np.asarray(baseline(obs)) + np.array(scales) * CORRECTION, -1, 1)
+    np.testing.assert_allclose(player(obs), expected, atol=1e-7)
+    assert player(obs)[1] == np.float64(baseline(obs)[1])

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym.policy_io.task import residual_action
+from foosball_gym.policy_io.task import residual_action, residual_scale
 from foosball_gym.training.loading.recurrent import RecurrentSnapshot
 from foosball_gym.training.loading.rl_zoo import find_zoo_run, is_zoo_run
 from foosball_gym.training.loading.rllib_policy import (
@@ -65,7 +65,7 @@ class LoadedPolicy:
     env_id: str | None
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     source: str = ""
-    trained_residual: float = 0.0
+    trained_residual: float | tuple[float, ...] = 0.0
     baseline: Any = None
 
     @property
@@ -221,7 +221,7 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     else:
         snapshot = cls(policy, env_id=env_id)
     warn_physics(config, f"the model {text}")
-    residual = float(env_kwargs.pop("residual", 0.0) or 0.0)
+    residual = residual_scale(env_kwargs.pop("residual", 0.0))
     baseline = None
     if residual and env_id is not None:
         from foosball_gym.registration import scripted_policy
@@ -306,7 +306,7 @@ def whole_action_policy(
     returned as it is, with the options unchanged.
     """
     options = dict(env_kwargs)
-    residual = float(options.pop("residual", 0.0) or 0.0)
+    residual = residual_scale(options.pop("residual", 0.0))
     if not residual:
         return policy, dict(env_kwargs)
     from foosball_gym.registration import scripted_policy

@@ -12,6 +12,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 import foosball_gym.registration  # noqa: F401  (the package registers the ids)
+from foosball_gym.policy_io.task import residual_scale
 from foosball_gym.training.config import VEC_ENV_KINDS, TrainConfig
 from foosball_gym.training.loading.loader import whole_action_policy
 from foosball_gym.training.selfplay.opponents import OpponentActionWrapper, SelfPlayVecEnv
@@ -61,7 +62,7 @@ def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
             levels = config.selfplay_scripted_levels or (None,)
             anchor = [venv.env_method("scripted_opponent", n, indices=[0])[0] for n in levels]
         whole_action = None
-        if config.env_kwargs.get("residual"):
+        if residual_scale(config.env_kwargs.get("residual")):
             # Snapshots of a residual learner give corrections; the opponent's side of the env
             # takes whole actions.
             def whole_action(snapshot: Any) -> Any:
