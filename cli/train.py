@@ -40,6 +40,18 @@ from .common import (
 )
 from .distributed import add_rllib_arguments, run_from_args
 
+
+def _levels(text: str) -> tuple[int, ...]:
+    try:
+        levels = tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected rung numbers of the scripted ladder separated by commas, e.g. 1,2,3; "
+            f"got {text!r}"
+        ) from None
+    return levels
+
+
 # The TrainConfig fields offered as options (n_envs as --n-envs), with how the command line
 # spells their values.
 OPTIONS: dict[str, dict[str, Any]] = {
@@ -65,6 +77,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "selfplay_threshold": {"type": float},
     "selfplay_pool": {"type": positive_int},
     "selfplay_scripted_share": {"type": float},
+    "selfplay_scripted_levels": {"type": _levels, "metavar": "N,N,..."},
     "selfplay_gate": {"type": int, "metavar": "GAMES"},
     "target_success": {"type": float},
     "video_every": {"type": positive_int, "metavar": "N"},
@@ -152,6 +165,8 @@ def add_parser(subparsers: Any) -> None:
 def _shown(default: Any) -> str:
     if default is None:
         return "off"
+    if default == ():
+        return "none"
     if isinstance(default, float):
         return f"{default:g}"
     return str(default)

@@ -55,6 +55,37 @@ def test_the_plan_is_straight_when_the_lane_is_open_and_angled_around_a_blocker(
     assert clearance(-0.5, 0.0, angle, blocked) > 0
 
 
+def _plan_shot_one_angle_at_a_time(x0, y0, blockers, steps=55):
+    """plan_shot as its docstring defines it, angle by angle through clearance()."""
+    from foosball_gym.policies.aiming import ANGLE_ERROR, ANGLE_ERROR_SLOPE, CLEAR_ENOUGH, MIN_ANGLE
+
+    if clearance(x0, y0, 0.0, blockers) > 0.0:
+        return 0.0
+    best, best_score = 0.0, -math.inf
+    for angle in np.linspace(-MAX_ANGLE, MAX_ANGLE, 2 * steps + 1).tolist():
+        if 0.0 < abs(angle) < MIN_ANGLE:
+            continue
+        error = ANGLE_ERROR + ANGLE_ERROR_SLOPE * abs(angle)
+        score = min(clearance(x0, y0, angle + d, blockers) for d in (-error, 0.0, error))
+        score = min(score, CLEAR_ENOUGH) - 0.01 * abs(angle)
+        if score > best_score:
+            best, best_score = angle, score
+    return best
+
+
+def test_the_planned_shot_is_the_one_clearance_judges_best_to_the_last_bit():
+    # plan_shot judges all its angles at once; a corner kick turns a rounding difference into
+    # another shot, so it must choose exactly what judging them one by one chooses.
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        x0, y0 = rng.uniform(-0.6, 0.55), rng.uniform(-0.32, 0.32)
+        blockers = [
+            (rng.uniform(-0.6, 0.6), tuple(rng.uniform(-0.33, 0.33, rng.integers(1, 6))))
+            for _ in range(rng.integers(0, 5))
+        ]
+        assert plan_shot(x0, y0, blockers) == _plan_shot_one_angle_at_a_time(x0, y0, blockers)
+
+
 def test_the_offset_grows_with_the_angle_and_keeps_its_sign():
     offsets = [offset_for_angle(math.radians(a)) for a in (10, 20, 30, 40, 50)]
     # Any angle needs the ball struck beside the leg's flat front, on a rounded end.

@@ -137,6 +137,9 @@ def test_figurine_observation_follows_the_rod(make_env):
         ("Foosball-KeeperVsKeeper-v0", {"opponent": "builtin:keeper-vs-keeper"}, "callable"),
         ("Foosball-Score-v0", {"residual": -0.1}, r"residual must be a number in \[0, 2.0\]"),
         ("Foosball-Block-v0", {"residual": "much"}, "residual must be a number"),
+        ("Foosball-Score-v0", {"residual": [0.5]}, "a list of 2 such numbers"),
+        ("Foosball-Score-v0", {"residual": [0.5, 3.0]}, "a list of 2 such numbers"),
+        ("Foosball-Score-v0", {"residual": [0.5, "x"]}, "a list of 2 such numbers"),
     ],
 )
 def test_invalid_arguments_say_what_is_allowed(env_id, kwargs, message):
@@ -181,6 +184,39 @@ def test_a_residual_policy_that_does_nothing_plays_the_scripted_baseline(env_id)
                 obs, *_ = residual.step(np.full(n, sign, dtype=np.float32))
             ends.append(obs[0])
         assert abs(ends[0] - ends[1]) > 0.01
+    finally:
+        plain.close()
+        residual.close()
+
+
+def test_a_residual_scale_of_0_leaves_its_joint_to_the_baseline():
+    """A scale for each entry of the action: the slides take the correction, the spins are
+    exactly the baseline's whatever the policy gives there."""
+    import numpy as np
+
+    env_id = "Foosball-FullGame-v0"
+    plain = gym.make(env_id)
+    baseline = plain.unwrapped.scripted_policy()
+    scales = [0.3, 0.0] * 4
+    residual = gym.make(env_id, residual=scales)
+    assert residual.unwrapped.residual == tuple(scales)
+    assert gym.make(env_id, residual=[0.0] * 8).unwrapped.residual == 0.0
+    rng = np.random.default_rng(0)
+    try:
+        obs, _ = residual.reset(seed=5)
+        sent = []
+        game = residual.unwrapped.game
+        command = game.command
+        game.command = lambda act: (sent.append(list(act)), command(act))[1]
+        for _ in range(30):
+            expected = np.asarray(baseline(obs), dtype=np.float64)
+            correction = rng.uniform(-1, 1, 8).astype(np.float32)
+            obs, *_ = residual.step(correction)
+            spins, slides = np.asarray(sent[-1])[1::2], np.asarray(sent[-1])[0::2]
+            np.testing.assert_array_equal(spins, expected[1::2])
+            np.testing.assert_allclose(
+                slides, np.clip(expected[0::2] + 0.3 * correction[0::2].astype(float), -1, 1)
+            )
     finally:
         plain.close()
         residual.close()

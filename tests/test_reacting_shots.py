@@ -73,3 +73,27 @@ def test_the_corner_shot_banks_into_the_corner_away_from_the_keeper():
         ys, slope = shots._paths(-0.475, 0.0, np.array([angle]), [table.BALL_LIMIT_X])
         assert side * ys[-1][0] == pytest.approx(shots.CORNER_MIDDLE, abs=0.01)
         assert ys[-1][0] * slope[0] < 0  # coming back towards the middle
+
+
+def test_a_planned_shot_is_judged_by_the_worst_of_its_aim_and_its_likely_errors():
+    # The plan judges an angle and the angles its error allows either side in one pass; it
+    # must choose exactly what judging each set of angles apart chooses.
+    from foosball_gym.policies.aiming import ANGLE_ERROR, ANGLE_ERROR_SLOPE
+
+    rods = [table.rod(f"away_{role}") for role in ("keeper", "defense", "midfield", "offense")]
+    rng = np.random.default_rng(5)
+    for _ in range(150):
+        x0, y0 = rng.uniform(-0.6, 0.5), rng.uniform(-0.32, 0.32)
+        defenders = [(r, rng.uniform(-r.slide_limit, r.slide_limit)) for r in rods]
+        react = bool(rng.random() < 0.5)
+        angles = shots._ANGLES
+        error = ANGLE_ERROR + ANGLE_ERROR_SLOPE * np.abs(angles)
+        score = np.minimum.reduce(
+            [shots.margins(x0, y0, angles + d, defenders, react) for d in (-error, 0.0, error)]
+        )
+        penalised = score - 0.001 * np.abs(angles)  # straighter shots win ties
+        best = int(np.argmax(penalised))
+        assert shots.plan_reacting_shot(x0, y0, defenders, react) == (
+            float(angles[best]),
+            float(penalised[best] + 0.001 * abs(angles[best])),
+        )

@@ -106,7 +106,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     - `residual`: above 0, the action corrects the task's scripted baseline, at most 2. The
       rods are sent `clip(scripted(obs) + residual * action, -1, 1)`, `obs` being the
       observation the action answers: an untrained policy (actions near 0) plays like the
-      baseline, and learning improves on it instead of learning it afresh.
+      baseline, and learning improves on it instead of learning it afresh. A list gives each
+      entry of the action a scale of its own; 0 leaves that joint to the baseline, so that
+      neither the policy's corrections nor its exploration reach it.
 
     Rendering:
 
@@ -180,7 +182,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         rolling_resistance_range: tuple[float, float] | None,
         estimated_state: bool,
         camera_noise: dict[str, Any] | None,
-        residual: float,
+        residual: float | tuple[float, ...],
         render_mode: str | None,
         render_width: int,
         render_height: int,
@@ -236,7 +238,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise ValueError("camera_noise needs estimated_state=True")
         self._n_act = self.interface.n_actions
         self.action_space = spaces.Box(-1.0, 1.0, shape=(self._n_act,), dtype=np.float32)
-        self.residual = env_options.check_residual(residual)
+        self.residual = env_options.check_residual(residual, self._n_act)
         # Residual RL: the action corrects the scripted baseline, which sees what the agent saw.
         self._baseline = self.scripted_policy() if self.residual else None
         self._last_obs: np.ndarray | None = None

@@ -104,7 +104,7 @@ class BlockEnv(FoosballEnv):
         rolling_resistance_range: tuple[float, float] | None = None,
         estimated_state: bool = False,
         camera_noise: dict[str, Any] | None = None,
-        residual: float = 0.0,
+        residual: float | tuple[float, ...] = 0.0,
         render_mode: str | None = None,
         render_width: int = 320,
         render_height: int = 180,

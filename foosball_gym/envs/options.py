@@ -35,16 +35,34 @@ RANDOMISATION_BOUNDS = {
 }
 
 
-def check_residual(value: Any) -> float:
-    """The residual scale: 0 (off) up to RESIDUAL_LIMIT, or a ValueError saying so."""
+def check_residual(value: Any, n_actions: int | None = None) -> float | tuple[float, ...]:
+    """The residual scale: 0 (off) up to RESIDUAL_LIMIT, or one such scale for each of the
+    ``n_actions`` entries of the action (all 0 is off, given as 0.0), or a ValueError saying
+    what is allowed. ``n_actions`` None: a list of any length but 0."""
+    allowed = (
+        f"residual must be a number in [0, {RESIDUAL_LIMIT}] (0: off), or a list of "
+        f"{n_actions or 'such'} such numbers, one for each entry of the action"
+    ).replace("such such", "such")
+    if isinstance(value, list | tuple | np.ndarray):
+        scales = [_scale(v) for v in value]
+        wrong_size = len(scales) != n_actions if n_actions is not None else not scales
+        if wrong_size or any(math.isnan(v) for v in scales):
+            raise ValueError(f"{allowed}; got {value!r}")
+        return tuple(scales) if any(scales) else 0.0
+    scale = _scale(value)
+    if math.isnan(scale):
+        raise ValueError(f"{allowed}; got {value!r}")
+    return scale
+
+
+def _scale(value: Any) -> float:
+    """``value`` as a scale within [0, RESIDUAL_LIMIT], NaN where it is none."""
     try:
         scale = float(value)
     except (TypeError, ValueError):
-        scale = math.nan
+        return math.nan
     if isinstance(value, bool) or not 0.0 <= scale <= RESIDUAL_LIMIT:
-        raise ValueError(
-            f"residual must be a number in [0, {RESIDUAL_LIMIT}] (0: off), got {value!r}"
-        )
+        return math.nan
     return scale
 
 

@@ -126,9 +126,9 @@ def plan_reacting_shot(
     """
     angles = _ANGLES
     error = ANGLE_ERROR + ANGLE_ERROR_SLOPE * np.abs(angles)
-    score = np.minimum.reduce(
-        [margins(x0, y0, angles + d, defenders, react) for d in (-error, 0.0, error)]
-    )
+    # Each angle's margin does not depend on the others: all three judged in one pass.
+    judged = np.concatenate([angles - error, angles, angles + error])
+    score = margins(x0, y0, judged, defenders, react).reshape(3, -1).min(axis=0)
     score -= 0.001 * np.abs(angles)
     best = int(np.argmax(score))
     return float(angles[best]), float(score[best] + 0.001 * abs(angles[best]))

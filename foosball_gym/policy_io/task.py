@@ -58,13 +58,23 @@ def action_joints(
     return tuple(driven), tuple(scales), tuple(held)
 
 
-def residual_action(baseline: Any, scale: float, correction: Any) -> np.ndarray:
-    """The action a residual policy sends: its baseline's action plus ``scale`` times its
-    correction, clipped to [-1, 1]. In double precision wherever it is made (the environment's
-    ``residual`` option, a loaded residual model): a corner kick turns a rounding difference
-    into another shot."""
+def residual_action(baseline: Any, scale: Any, correction: Any) -> np.ndarray:
+    """The action a residual policy sends: its baseline's action plus ``scale`` (one number,
+    or one for each entry of the action) times its correction, clipped to [-1, 1]. In double
+    precision wherever it is made (the environment's ``residual`` option, a loaded residual
+    model): a corner kick turns a rounding difference into another shot."""
     base = np.asarray(baseline, dtype=np.float64)
+    scale = np.asarray(scale, dtype=np.float64)
     return np.clip(base + scale * np.asarray(correction, dtype=np.float64), -1.0, 1.0)
+
+
+def residual_scale(value: Any) -> float | tuple[float, ...]:
+    """The environment option ``residual`` as a run's configuration records it (a number, a
+    list of one for each entry of the action, or nothing): 0.0 where it is off."""
+    if isinstance(value, list | tuple | np.ndarray):
+        scales = tuple(float(v) for v in value)
+        return scales if any(scales) else 0.0
+    return float(value or 0.0)
 
 
 def check_action(action: Any, n: int, what: str = "action") -> list[float]:

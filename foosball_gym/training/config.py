@@ -102,6 +102,11 @@ class TrainConfig:
         "share of self-play games against the scripted opponent instead of a snapshot, in "
         "[0, 1); they do not count towards replacing the opponent",
     )
+    selfplay_scripted_levels: tuple[int, ...] = _field(
+        (),
+        "the rungs of the game's scripted ladder that the scripted share of the games is drawn "
+        "from, one at random for each game (empty: the top alone, the default opponent)",
+    )
     selfplay_sampled: bool = _field(
         False,
         "self-play opponents sample their actions as the learner does, instead of acting on "
@@ -218,12 +223,18 @@ class TrainConfig:
                 f"got {self.video_every!r}"
             )
         env = gym.make(self.env_id, **self.env_kwargs)  # raises on a bad env option
-        two_player = bool(cast("FoosballEnv", env.unwrapped).layout.opponent)
-        env.close()
-        if self.self_play and not two_player:
-            raise ValueError(f"{self.env_id} has no opponent; self-play needs a two-player task")
-        if self.self_play is None:
-            self.self_play = two_player
+        try:
+            two_player = bool(cast("FoosballEnv", env.unwrapped).layout.opponent)
+            if self.self_play and not two_player:
+                raise ValueError(
+                    f"{self.env_id} has no opponent; self-play needs a two-player task"
+                )
+            if self.self_play is None:
+                self.self_play = two_player
+            if self.selfplay_scripted_levels:
+                self._check_levels(cast("FoosballEnv", env.unwrapped))
+        finally:
+            env.close()
         if self.selfplay_gate and not self.self_play:
             raise ValueError(
                 f"selfplay_gate judges self-play's replacements; {self.env_id} trains without "
@@ -235,6 +246,27 @@ class TrainConfig:
             # In a continuous match a still ball is served again, not drawn: that rule stays.
             if not self.env_kwargs.get("continuous"):
                 self.env_kwargs.setdefault("stagnation_steps", 0)
+
+    def _check_levels(self, env: FoosballEnv) -> None:
+        levels = self.selfplay_scripted_levels
+        if isinstance(levels, str | bytes) or not all(
+            isinstance(n, int) and not isinstance(n, bool) for n in levels
+        ):
+            raise ValueError(
+                "selfplay_scripted_levels must be a list of the ladder's rung numbers, e.g. "
+                f"[1, 2, 3], got {levels!r}"
+            )
+        if not self.self_play or not self.selfplay_scripted_share:
+            raise ValueError(
+                "selfplay_scripted_levels says which scripted teams the scripted share of "
+                "self-play's games meets: it needs self-play and selfplay_scripted_share above 0"
+            )
+        for level in levels:
+            try:
+                env.scripted_opponent(level)
+            except ValueError as e:
+                raise ValueError(f"selfplay_scripted_levels: {e}") from None
+        self.selfplay_scripted_levels = tuple(levels)
 
     def save(self, path: Path) -> None:
         """Write the configuration with the record of the physics it is about to train on.

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym.policy_io.task import residual_action
+from foosball_gym.policy_io.task import residual_action, residual_scale
 from foosball_gym.training.loading.recurrent import RecurrentSnapshot
 from foosball_gym.training.loading.rl_zoo import find_zoo_run, is_zoo_run
 from foosball_gym.training.loading.rllib_policy import (
@@ -67,7 +67,7 @@ class LoadedPolicy:
     env_id: str | None
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     source: str = ""
-    trained_residual: float = 0.0
+    trained_residual: float | tuple[float, ...] = 0.0
     baseline: Any = None
 
     @property
@@ -246,7 +246,7 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     else:
         snapshot = cls(policy, env_id=env_id)
     warn_physics(config, f"the model {text}")
-    residual = float(env_kwargs.pop("residual", 0.0) or 0.0)
+    residual = residual_scale(env_kwargs.pop("residual", 0.0))
     baseline = None
     if residual and env_id is not None:
         from foosball_gym.registration import scripted_policy
@@ -354,3 +354,33 @@ def _find_norm_names(zip_path: Path, run_dir: Path) -> str:
 
 
 NORM_NAMES = (NORM_FILE, LEGACY_NORM_FILE)
+
+
+def whole_action_policy(
+    policy: Any, env_id: str, env_kwargs: dict[str, Any]
+) -> tuple[Any, dict[str, Any]]:
+    """``policy`` (a snapshot of a model trained on ``env_id`` with ``env_kwargs``) as a
+    player that gives the whole action, and the options of an environment that takes it.
+
+    A model trained with the option ``residual`` gives corrections to the scripted baseline:
+    wherever it plays as an opponent, or in a game whose environment must take both sides'
+    whole actions (self-play's opponents, a gate, a league), it plays as the baseline plus its
+    correction, and the environment is made without ``residual``. Any other policy is
+    returned as it is, with the options unchanged.
+    """
+    options = dict(env_kwargs)
+    residual = residual_scale(options.pop("residual", 0.0))
+    if not residual:
+        return policy, dict(env_kwargs)
+    from foosball_gym.registration import scripted_policy
+
+    baseline = scripted_policy(env_id, options)
+    player = LoadedPolicy(
+        policy=policy,
+        env_id=env_id,
+        env_kwargs=options,
+        source=f"a residual policy of {env_id}",
+        trained_residual=residual,
+        baseline=baseline,
+    )
+    return player, options

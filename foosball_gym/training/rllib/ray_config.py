@@ -7,6 +7,7 @@ import functools
 import math
 from typing import Any
 
+from foosball_gym.policy_io.task import residual_scale
 from foosball_gym.training.config import TrainConfig
 from foosball_gym.training.rllib.env_runner import ENV_NAME, LEARNER, map_agent, record_game
 
@@ -32,6 +33,11 @@ def check_rllib_config(config: TrainConfig, num_workers: int) -> None:
         raise ValueError(
             "the rllib backend plays snapshots only; leave selfplay_scripted_share at 0, or "
             "train with --backend sb3"
+        )
+    if residual_scale(config.env_kwargs.get("residual")):
+        raise ValueError(
+            "the rllib backend's snapshots would play their bare corrections as the opponent; "
+            "train a residual policy (the environment option residual) with --backend sb3"
         )
     if config.selfplay_sampled:
         raise ValueError(

@@ -12,7 +12,9 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 import foosball_gym.registration  # noqa: F401  (the package registers the ids)
+from foosball_gym.policy_io.task import residual_scale
 from foosball_gym.training.config import VEC_ENV_KINDS, TrainConfig
+from foosball_gym.training.loading.loader import whole_action_policy
 from foosball_gym.training.selfplay.opponents import OpponentActionWrapper, SelfPlayVecEnv
 
 
@@ -57,13 +59,22 @@ def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
         n = venv.action_space.shape[0] // 2
         anchor = None
         if config.selfplay_scripted_share:
-            anchor = venv.env_method("scripted_opponent", indices=[0])[0]
+            levels = config.selfplay_scripted_levels or (None,)
+            anchor = [venv.env_method("scripted_opponent", n, indices=[0])[0] for n in levels]
+        whole_action = None
+        if residual_scale(config.env_kwargs.get("residual")):
+            # Snapshots of a residual learner give corrections; the opponent's side of the env
+            # takes whole actions.
+            def whole_action(snapshot: Any) -> Any:
+                return whole_action_policy(snapshot, config.env_id, config.env_kwargs)[0]
+
         venv = SelfPlayVecEnv(
             venv,
             lambda obs: np.zeros((len(obs), n), np.float32),
             config.seed,
             anchor=anchor,
             anchor_share=config.selfplay_scripted_share,
+            whole_action=whole_action,
         )
     if config.normalize or config.normalize_reward:
         venv = VecNormalize(

@@ -24,6 +24,7 @@ import copy
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from foosball_gym.training.loading.loader import whole_action_policy
 from foosball_gym.training.selfplay.matches import Arena, Player, play_pair
 
 # Gate games are served with seeds from here on, offset by the learner's step count, so that
@@ -89,6 +90,8 @@ class ReplacementGate:
         self.env_id = env_id
         self.env_kwargs = dict(env_kwargs or {})
         self.games = int(games)
+        # A residual learner's snapshots play with their baseline, in games without the option.
+        self._arena_kwargs = {k: v for k, v in self.env_kwargs.items() if k != "residual"}
         self._arena: Arena | None = None
 
     def judge(self, learner: Any, opponent: Any, timesteps: int) -> GateVerdict:
@@ -97,9 +100,9 @@ class ReplacementGate:
         ``learner`` and ``opponent`` are policy snapshots; copies of them act on the mean.
         """
         if self._arena is None:
-            self._arena = Arena(self.env_id, self.env_kwargs)
-        me = Player("learner", _on_mean(learner))
-        them = Player("opponent", _on_mean(opponent))
+            self._arena = Arena(self.env_id, self._arena_kwargs)
+        me = Player("learner", self._whole(_on_mean(learner)))
+        them = Player("opponent", self._whole(_on_mean(opponent)))
         scripted = Player("scripted", None)
         seed = GATE_SEED_BASE + int(timesteps)
         duel = play_pair(self._arena, me, them, self.games, seed)
@@ -116,6 +119,9 @@ class ReplacementGate:
             opponent_goals_for=theirs.goals_a,
             opponent_goals_against=theirs.goals_b,
         )
+
+    def _whole(self, snapshot: Any) -> Any:
+        return whole_action_policy(snapshot, self.env_id, self.env_kwargs)[0]
 
     def close(self) -> None:
         if self._arena is not None:

@@ -236,6 +236,7 @@ def run_players(
     which never kicked a ball at each other, drew every game between them 0-0).
     """
     from foosball_gym.training.loading import load_policy
+    from foosball_gym.training.loading.loader import whole_action_policy
     from foosball_gym.training.loading.rllib_policy import RllibPolicy, load_rllib_snapshot
     from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
 
@@ -247,6 +248,11 @@ def run_players(
             "only; rate it without sampling"
         )
     history = read_history(run_dir / SELFPLAY_DIR / HISTORY_FILE)
+    # A residual run's players give whole actions (its final policy as loaded does too), so
+    # its games are played without the option.
+    trained_kwargs = dict(config.get("env_kwargs") or {})
+    played_kwargs = {k: v for k, v in trained_kwargs.items() if k != "residual"}
+    config = {**config, "env_kwargs": played_kwargs}
     by_generation = {h["generation"]: h for h in history}
     players = []
     for g in pick_generations(list(by_generation), most_generations):
@@ -258,7 +264,8 @@ def run_players(
         else:
             policy = PolicySnapshot.load(path, trust=trust)
             policy.deterministic = not sampled
-        players.append(Player(f"gen {g}", policy, g, by_generation[g].get("timesteps")))
+        player = whole_action_policy(policy, config["env_id"], trained_kwargs)[0]
+        players.append(Player(f"gen {g}", player, g, by_generation[g].get("timesteps")))
     final = load_policy(run_dir, trust=trust)
     if isinstance(final.policy, PolicySnapshot):  # an RLlib policy acts on its mean only
         final.policy.deterministic = not sampled

@@ -14,6 +14,7 @@ Which snapshots make the pool is the choice of
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
@@ -28,7 +29,7 @@ if TYPE_CHECKING:
 OPPONENT_OBS = "opponent_obs"
 # In the info of a game's last step: the game was against the scripted anchor, not a snapshot.
 AGAINST_ANCHOR = "against_scripted_anchor"
-_ANCHOR = -1  # the pool index that stands for the anchor
+# The pool indices -1, -2, ... stand for the anchors.
 
 
 class _QueuedAction:
@@ -79,10 +80,16 @@ class SelfPlayVecEnv(VecEnvWrapper):
         venv: the vectorised envs (each wrapped in ``OpponentActionWrapper``).
         opponent: the first opponent (a callable on a batch of observations).
         seed: seeds the choice of opponents from the pool.
-        anchor: a fixed opponent acting on one observation (the scripted team), played in
-            ``anchor_share`` of the games instead of the pool; the last step's info of such a
+        anchor: a fixed opponent acting on one observation (the scripted team), or a list of
+            them (rungs of the scripted ladder), played in ``anchor_share`` of the games instead
+            of the pool, one drawn at random for each such game; the last step's info of such a
             game says so (``AGAINST_ANCHOR``), so that the replacement rule can leave it out.
-        anchor_share: the share of games against ``anchor``, in [0, 1).
+        anchor_share: the share of games against an anchor, in [0, 1).
+        whole_action: where the learner's actions are corrections to the scripted baseline
+            (the environment option ``residual``), what turns a snapshot of it into a player
+            that gives the whole action
+            (:func:`~foosball_gym.training.loading.loader.whole_action_policy`): the opponent's
+            side of the environment takes whole actions. The anchors give them already.
     """
 
     def __init__(
@@ -92,18 +99,21 @@ class SelfPlayVecEnv(VecEnvWrapper):
         seed: int | None = None,
         anchor: Any = None,
         anchor_share: float = 0.0,
+        whole_action: Callable[[Any], Any] | None = None,
     ) -> None:
         assert venv.action_space.shape is not None  # OpponentActionWrapper's Box
         n = venv.action_space.shape[0] // 2
         learner_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
         super().__init__(venv, action_space=learner_space)
-        if not 0.0 <= anchor_share < 1.0 or (anchor_share > 0.0 and anchor is None):
+        if not 0.0 <= anchor_share < 1.0 or (anchor_share > 0.0 and not _listed(anchor)):
             raise ValueError(
                 f"anchor_share must be in [0, 1), and above 0 only with an anchor; got "
                 f"{anchor_share!r} with {'an' if anchor is not None else 'no'} anchor"
             )
-        self.anchor, self.anchor_share = anchor, float(anchor_share)
-        self.pool: list[Any] = [opponent]
+        self.anchors = _listed(anchor)
+        self.anchor_share = float(anchor_share)
+        self.whole_action = whole_action
+        self.pool: list[Any] = [whole_action(opponent) if whole_action else opponent]
         self._rng = np.random.default_rng(seed)
         self._assigned = np.zeros(self.num_envs, dtype=int)
         self._opp_obs: np.ndarray | None = None
@@ -115,12 +125,15 @@ class SelfPlayVecEnv(VecEnvWrapper):
         """Replace the opponents; envs draw from the new pool at their next episode."""
         if not pool:
             raise ValueError("the opponent pool must not be empty")
-        self.pool = list(pool)
+        self.pool = [self.whole_action(p) for p in pool] if self.whole_action else list(pool)
         self._assigned = np.minimum(self._assigned, len(self.pool) - 1)
 
     def _draw(self) -> int:
         if self.anchor_share and self._rng.random() < self.anchor_share:
-            return _ANCHOR
+            # One anchor draws nothing more, as before there could be several.
+            if len(self.anchors) == 1:
+                return -1
+            return -1 - int(self._rng.integers(len(self.anchors)))
         return int(self._rng.integers(len(self.pool)))
 
     # -- VecEnv -------------------------------------------------------------
@@ -137,8 +150,9 @@ class SelfPlayVecEnv(VecEnvWrapper):
         opp = np.zeros_like(actions, dtype=np.float32)
         for k in np.unique(self._assigned):
             idx = np.nonzero(self._assigned == k)[0]
-            if k == _ANCHOR:
-                opp[idx] = np.stack([self.anchor(o) for o in self._opp_obs[idx]])
+            if k < 0:
+                anchor = self.anchors[-1 - k]
+                opp[idx] = np.stack([anchor(o) for o in self._opp_obs[idx]])
             else:
                 opp[idx] = self.pool[k](self._opp_obs[idx])
         self.opponent_seconds += time.perf_counter() - start
@@ -149,13 +163,19 @@ class SelfPlayVecEnv(VecEnvWrapper):
         assert self._opp_obs is not None  # reset() sets it before any step
         for i, done in enumerate(dones):
             if done:
-                if self._assigned[i] == _ANCHOR:
+                if self._assigned[i] < 0:
                     infos[i][AGAINST_ANCHOR] = True
                 self._opp_obs[i] = self.venv.reset_infos[i][OPPONENT_OBS]
                 self._assigned[i] = self._draw()
             else:
                 self._opp_obs[i] = infos[i][OPPONENT_OBS]
         return obs, rewards, dones, infos
+
+
+def _listed(anchor: Any) -> list[Any]:
+    if anchor is None:
+        return []
+    return list(anchor) if isinstance(anchor, list | tuple) else [anchor]
 
 
 def find_selfplay_env(env: VecEnv | None) -> SelfPlayVecEnv:
