@@ -39,10 +39,11 @@ def check_residual(value: Any, n_actions: int | None = None) -> float | tuple[fl
     """The residual scale: 0 (off) up to RESIDUAL_LIMIT, or one such scale for each of the
     ``n_actions`` entries of the action (all 0 is off, given as 0.0), or a ValueError saying
     what is allowed. ``n_actions`` None: a list of any length but 0."""
+    count = "such numbers" if n_actions is None else f"{n_actions} such numbers"
     allowed = (
-        f"residual must be a number in [0, {RESIDUAL_LIMIT}] (0: off), or a list of "
-        f"{n_actions or 'such'} such numbers, one for each entry of the action"
-    ).replace("such such", "such")
+        f"residual must be a number in [0, {RESIDUAL_LIMIT}] (0: off), or a list of {count}, "
+        "one for each entry of the action"
+    )
     if isinstance(value, list | tuple | np.ndarray):
         scales = [_scale(v) for v in value]
         wrong_size = len(scales) != n_actions if n_actions is not None else not scales
