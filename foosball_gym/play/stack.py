@@ -303,7 +303,6 @@ def play_sim(
             TableDrives(config, clock=table.clock) as drives,
             collector_paused_for_old_objects(),
         ):
-<<<<<<< HEAD
             try:
                 drives.bring_up()
                 loop = PlayLoop(
@@ -325,7 +324,7 @@ def play_sim(
                     # Its first frame comes at once, the next after the camera's latency.
                     loop.new_ball(first_frame_early_by=table.camera_latency)
                     if gui:
-                        table.show_text(_score_lines(report, table, serve, episodes, rod))
+                        table.show_text(_score_lines(report, table, serve, episodes, rod, view))
                     if record is not None and realtime:
                         # The table's clock runs on while the camera shows the new ball: the rods
                         # keep their last targets, and the watchdog hears the loop is alive.
@@ -336,7 +335,9 @@ def play_sim(
                         record = loop.decide()
                         true_x, true_y, _, _ = table.ball(at=record.frame_time)
                         loop.send(record)
+                        truth = table.true_state()  # after the command: it must not wait
                         goal, out = table.step()
+                        record.truth = {**truth, "goal": int(goal), "out": bool(out)}
                         record.late = table.late_steps > late
                         loop.receive(record)
                         if record.ball_measured is not None:
@@ -350,7 +351,7 @@ def play_sim(
                                 )
                             )
                         if goal and gui:
-                            table.show_text(_score_lines(report, table, serve, episodes, rod))
+                            table.show_text(_score_lines(report, table, serve, episodes, rod, view))
                         closed = gui and not table.window_open
                         if goal or out or table.stagnated or closed:
                             break
@@ -364,64 +365,6 @@ def play_sim(
                 # However the loop ended, the table moves on while the drives brake and
                 # switch off: a lock-step table waits for the loop no more.
                 table.run_on()
-=======
-            drives.bring_up()
-            loop = PlayLoop(
-                policy,
-                interface,
-                drives,
-                source,
-                *perception,
-                clock=table.clock,
-                on_record=on_record,
-            )
-            table.step()  # the drives report their state once before the first decision
-            loop.start()
-            record = None
-            for serve in range(1, episodes + 1):
-                table.serve()
-                # Without this the filter would take the new ball for the old one jumping,
-                # and spend the first frames of a fast shot unlearning that velocity.
-                loop.new_ball()
-                if gui:
-                    table.show_text(_score_lines(report, table, serve, episodes, rod, view))
-                if record is not None and realtime:
-                    # The table's clock runs on while the camera shows the new ball: the rods
-                    # keep their last targets, and the watchdog hears the loop is alive.
-                    loop.send(record)
-                for _ in range(max_steps):
-                    # A step the table took while the loop was busy: its command was late.
-                    late = table.late_steps
-                    record = loop.decide()
-                    true_x, true_y, _, _ = table.ball(at=record.frame_time)
-                    loop.send(record)
-                    truth = table.true_state()  # after the command: it must not wait
-                    goal, out = table.step()
-                    record.truth = {**truth, "goal": int(goal), "out": bool(out)}
-                    record.late = table.late_steps > late
-                    loop.receive(record)
-                    if record.ball_measured is not None:
-                        report.ball_error_mm.append(
-                            1e3
-                            * float(
-                                np.hypot(
-                                    record.ball_measured[0] - true_x,
-                                    record.ball_measured[1] - true_y,
-                                )
-                            )
-                        )
-                    if goal and gui:
-                        table.show_text(_score_lines(report, table, serve, episodes, rod, view))
-                    closed = gui and not table.window_open
-                    if goal or out or table.stagnated or closed:
-                        break
-                report.episodes += 1
-                report.successes += table.success
-                report.goals_for += table.goals_for
-                report.goals_against += table.goals_against
-                if gui and not table.window_open:
-                    break  # a person closed the window: the game ends with this serve
->>>>>>> i34-replay
     finally:
         if log is not None:
             log.close()

@@ -45,7 +45,6 @@ def urdf_with_rods(rod_names: tuple[str, ...]) -> str:
     # The copy lives elsewhere, so the meshes it names are given by their full path.
     for mesh in robot.iter("mesh"):
         mesh.set("filename", str(urdf_path(mesh.get("filename", ""))))
-<<<<<<< HEAD
     return ET.tostring(robot, encoding="unicode")
 
 
@@ -64,22 +63,23 @@ def urdf_file(text: str) -> Iterator[str]:
         path = os.path.join(folder, "table.urdf")
         # O_EXCL: a fresh file of this user's, never one that was there.
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-=======
-    return _written(ET.tostring(robot, encoding="unicode"))
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        yield path
 
 
 @cache
 def urdf_for_window(rod_names: tuple[str, ...]) -> str:
-    """The table with the rods ``rod_names`` as the GUI window draws them: the rods' figurines
-    only, without the table's parts and the rods' bars. For the window only: nothing in it
-    collides with the table.
+    """The table's URDF text with the rods ``rod_names`` as the GUI window draws them: the
+    rods' figurines only, without the table's parts and the rods' bars. For the window only:
+    nothing in it collides with the table.
 
     PyBullet's GUI draws all the shapes of one link in one colour, the last one's: the table
     link (field, walls, goal pockets) came out in the pockets' near-black and a rod's bar in
     its team's colour. The window draws those parts as bodies of their own
     (:func:`table_boxes`), each in its colour.
     """
-    robot = ET.fromstring(Path(urdf_with_rods(rod_names)).read_text())
+    robot = ET.fromstring(urdf_with_rods(rod_names))
     for link in robot.findall("link"):
         for visual in link.findall("visual"):
             if visual.get("name", "").endswith("_bar"):
@@ -88,7 +88,7 @@ def urdf_for_window(rod_names: tuple[str, ...]) -> str:
             # The collision shapes too: the GUI draws those of a link without visual shapes.
             for part in link.findall("visual") + link.findall("collision"):
                 link.remove(part)
-    return _written(ET.tostring(robot, encoding="unicode"))
+    return ET.tostring(robot, encoding="unicode")
 
 
 def table_boxes() -> list[tuple[tuple[float, float, float], tuple[float, float, float], str]]:
@@ -104,21 +104,6 @@ def table_boxes() -> list[tuple[tuple[float, float, float], tuple[float, float, 
         material = _attr(_find(visual, "material"), "name")
         boxes.append((centre, size, material))
     return boxes  # type: ignore[return-value]
-
-
-def _written(text: str) -> str:
-    """The path of a file holding ``text``, written once per content."""
-    # Named by content, so processes share one file and a changed table gets a new one.
-    digest = hashlib.sha1(text.encode()).hexdigest()[:16]
-    path = Path(tempfile.gettempdir()) / f"foosball_gym_{digest}.urdf"
-    # Anyone can write to the temp folder: a file under this name is used only if it holds
-    # exactly this table.
-    if not _holds(path, text):
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".urdf")
->>>>>>> i34-replay
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        yield path
 
 
 def _find(element: ET.Element, tag: str) -> ET.Element:

@@ -13,12 +13,8 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table
-<<<<<<< HEAD
 from foosball_gym.camera import CameraModel, check_image_side
-=======
-from foosball_gym.camera import CameraModel
 from foosball_gym.sim.urdf import table_boxes, urdf_for_window
->>>>>>> i34-replay
 from foosball_gym.sim.worlds import UPRIGHT, World, pybullet
 
 # The names :meth:`View.keyboard_events` gives PyBullet's codes of keys without a character.

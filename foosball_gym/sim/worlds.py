@@ -126,7 +126,7 @@ def drive_masses(names: tuple[str, ...]) -> tuple[tuple[float, ...], tuple[float
 class World:
     """One Bullet world: the table with the rods ``names``, and a ball.
 
-    ``urdf`` loads another file of the same table and rods (the GUI window's: see
+    ``urdf`` is the text of another URDF of the same table and rods (the GUI window's: see
     :func:`~foosball_gym.sim.urdf.urdf_for_window`); ``window_options`` size the GUI window.
 
     Which of its rods stand in the table (``placed``; the others wait parked, out of the ball's
@@ -179,13 +179,9 @@ class World:
             p.configureDebugVisualizer(pybullet.COV_ENABLE_SHADOWS, 0)
             # Looking down with the home goal on the left: the screen's right is +x, its up +y.
             p.resetDebugVisualizerCamera(1.1, 0, -89.9, [0, 0, 0])
-<<<<<<< HEAD
-        with urdf_file(urdf_with_rods(self.names)) as path, _quiet_stdout():
+        text = urdf or urdf_with_rods(self.names)
+        with urdf_file(text) as path, _quiet_stdout():
             self.body = p.loadURDF(path, useFixedBase=True)
-=======
-        with _quiet_stdout():
-            self.body = p.loadURDF(urdf or urdf_with_rods(self.names), useFixedBase=True)
->>>>>>> i34-replay
         index = {
             p.getJointInfo(self.body, i)[1].decode(): i for i in range(p.getNumJoints(self.body))
         }
