@@ -302,6 +302,7 @@ class TrainConfig:
             data["selfplay_rule"] = "net_score"
         config = cls(**{k: v for k, v in data.items() if k in names})
         config.net_arch = tuple(config.net_arch)
+        config.selfplay_scripted_levels = tuple(config.selfplay_scripted_levels)
         return config
 
 
