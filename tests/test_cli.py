@@ -28,8 +28,9 @@ MAIN_OPTIONS = {
     "train": ["env_id", "--timesteps", "--n-envs", "--algo", "--out", "--resume", "--env-kwarg"],
     "eval": ["target", "--policy", "--episodes", "--seed", "--opponent", "--json", "--video"],
     "league": ["run", "--add", "--games", "--generations", "--no-scripted", "--out"],
-    "play": ["model", "--table", "--env", "--episodes", "--camera", "--latency", "--log"],
+    "play": ["model", "--table", "--env", "--episodes", "--camera", "--latency", "--log", "--serves"],
     "calibrate": ["--table", "--frame", "--chessboard", "--pattern", "--square", "--home-side"],
+    "sysid": ["LOG.jsonl", "--json", "--config", "--env", "--plot"],
     "envs": ["registered environments"],
     "migrate": ["RUN", "--trust-model"],
 }

@@ -248,6 +248,60 @@ def test_calibration_balls_start_clear_of_every_rod_and_run_across_the_table():
     assert len(free_bands(("home_keeper",))) == 2
 
 
+def fitted(values, task_options=None, not_determined=None):
+    from foosball_gym.sysid.result import SysidResult
+
+    return SysidResult(
+        values=values,
+        std={k: 0.01 * abs(v) for k, v in values.items()},
+        not_determined=not_determined or {},
+        residuals={"ball_track_mm": (3.0, 0.2)},
+        data={},
+        logs=["a.jsonl"],
+        env_id=ENV_ID,
+        task_options=task_options or {},
+    )
+
+
+def test_fitted_values_become_the_environments_options_and_a_settings_file_training_reads(
+    tmp_path,
+):
+    pytest.importorskip("yaml")
+    from foosball_gym.training.config_file import load_train_config
+
+    result = fitted(
+        {
+            "rolling_resistance": 0.0213,
+            "ball_restitution": 0.41234,
+            "drive_gain": 0.7,
+            "drive_latency_s": 0.004,
+            "camera_latency_s": 0.04,
+        },
+        not_determined={"ball_friction": "hardly shown"},
+    )
+    assert result.env_kwargs() == {
+        "rolling_resistance": 0.0213,
+        "ball_restitution_range": [0.4123, 0.4123],
+        "drive_gain_range": [0.7, 0.7],
+    }
+    assert "--env-kwarg 'ball_restitution_range=(0.4123,0.4123)'" in result.env_kwarg_flags()
+    data = result.to_json()
+    assert data["rolling_resistance"] == 0.0213 and "ball_friction" not in data
+    assert data["not_determined"] == {"ball_friction": "hardly shown"}
+    json.dumps(data, allow_nan=False)
+    path = tmp_path / "fitted.yaml"
+    path.write_text(result.config_text())
+    config = load_train_config(str(path))
+    assert config.env_id == ENV_ID and config.algo == "ppo"  # the shipped settings, kept
+    assert config.env_kwargs["ball_restitution_range"] == [0.4123, 0.4123]
+    # The camera's latency only where the environment sees through the camera.
+    seeing = fitted({"camera_latency_s": 0.04}, {"estimated_state": True})
+    assert seeing.env_kwargs() == {"camera_noise": {"latency_s": 0.04}}
+    assert seeing.config()["env_kwargs"]["estimated_state"] is True
+    with pytest.raises(ValueError, match="unknown environment"):
+        result.config("Foosball-Pinball-v3")
+
+
 # ---------------------------------------------------------------- the simulator's side
 
 

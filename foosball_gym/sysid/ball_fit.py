@@ -322,7 +322,7 @@ def _fit_rolling(
     problem: BallProblem, physics: np.ndarray, starts: np.ndarray, which: list[int]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rolling resistance and friction, the starts of the stretches ``which`` fitted with them:
-    (physics, starts, the two parameters' uncertainties).
+    (physics, starts, the two parameters' uncertainties: the data's, and the last step's).
 
     Gauss-Newton on the two parameters alone (variable projection): at each step every
     stretch's start is fitted under the physics so far, and the step is taken on what the
@@ -360,7 +360,9 @@ def _fit_rolling(
             break
     for i in which:
         starts[i] = fit_start(problem, physics, i, starts[i], _WARM_ITERATIONS).x
-    return physics, starts, np.sqrt(np.diag(covariance))
+    # The last step is as far as the fit may still be from where it would settle: it counts
+    # into the uncertainty with the data's own.
+    return physics, starts, np.sqrt(np.diag(covariance) + last**2)
 
 
 def _better(problem: BallProblem, physics: np.ndarray, segment: int, start: np.ndarray):

@@ -5,6 +5,7 @@ make the environments play on the fitted table. Nothing here needs the simulator
 from __future__ import annotations
 
 import math
+import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -174,7 +175,8 @@ class SysidResult:
     def env_kwarg_flags(self) -> str:
         """The fitted options as ``foosball play``'s and ``foosball eval``'s ``--env-kwarg``."""
         return " ".join(
-            f"--env-kwarg {key}={_spelled(value)}" for key, value in self.env_kwargs().items()
+            f"--env-kwarg {shlex.quote(f'{key}={_spelled(value)}')}"
+            for key, value in self.env_kwargs().items()
         )
 
     # ------------------------------------------------------------------ for programs
