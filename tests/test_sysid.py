@@ -394,24 +394,6 @@ def test_the_simulated_table_serves_calibration_balls_for_four_seconds():
         simulated_table({}, serves="drills")
 
 
-@pytest.mark.parametrize(
-    ("kwarg", "message"),
-    [
-        ("foo=1", "BlockEnv has no option 'foo'"),
-        ("ball_restitution_range=(0.4,2)", "ball_restitution_range must satisfy"),
-        ("goal_reward='lots'", "reward weight goal must be a finite number, got 'lots'"),
-        ("rolling_resistance=-1", "rolling_resistance must be a number in [0.0, 0.5]"),
-    ],
-)
-def test_play_refuses_an_unknown_or_invalid_environment_option_in_one_line(kwarg, message, capsys):
-    argv = ["play", "scripted", "--env", ENV_ID, "--table", "sim", "--env-kwarg", kwarg]
-    with pytest.raises(SystemExit) as exit_info:
-        main(argv)
-    assert exit_info.value.code == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and message in err, err
-
-
 def test_calibration_serves_are_refused_on_a_real_table(capsys):
     from foosball_gym.hardware.config import shipped_table
 
