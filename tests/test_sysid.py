@@ -420,8 +420,10 @@ def record_calibration(folder: Path, env_kwargs, seconds: float, camera=SMALL_CA
     policy = scripted_policy(ENV_ID, env_kwargs, on_table=True)
     serve_loops = round(CALIBRATION_SERVE_S * table.CONTROL_HZ)
     limit = round(seconds * table.CONTROL_HZ)
-    logs, loops, seed = [], 0, 1
-    while loops < 0.8 * limit and (limit - loops) // serve_loops >= 1:
+    logs, loops = [], 0
+    for seed in range(1, 100):
+        if loops >= 0.8 * limit or (limit - loops) // serve_loops < 1:
+            break
         path = folder / f"session-{seed}.jsonl"
         try:
             play_sim(
@@ -438,8 +440,7 @@ def record_calibration(folder: Path, env_kwargs, seconds: float, camera=SMALL_CA
             pass
         logs.append(str(path))
         loops += sum(1 for _ in path.open()) - 1
-        seed += 1
-    assert loops <= limit
+    assert 0.8 * limit <= loops <= limit
     return logs
 
 
