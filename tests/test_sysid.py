@@ -220,6 +220,26 @@ def test_a_track_is_cut_at_its_wall_bounce_into_two_linked_stretches(tmp_path):
     assert stretches[0].xy[:, 1].max() < wall_y - 0.005  # the frames at the wall left out
 
 
+def test_a_budget_draws_whole_stretches_evenly_and_keeps_each_ones_bounce():
+    from foosball_gym.sysid.segments import BallSegment, within_budget
+
+    def stretch(follows=None, wall=None):
+        times = np.arange(61) / 60  # a second each
+        return BallSegment(0, 1, 0.0, times, np.zeros((61, 2)), follows, wall)
+
+    # Ten stretches, each followed through a bounce by another.
+    segments = []
+    for _ in range(10):
+        segments += [stretch(), stretch(len(segments), "side")]
+    chosen = within_budget(segments, 4.0)
+    heads = [s for s in chosen if s.wall is None]
+    assert len(heads) == 4 and len(chosen) == 8
+    for i, s in enumerate(chosen):
+        if s.wall is not None:
+            assert chosen[s.follows].wall is None and s.follows == i - 1
+    assert within_budget(segments, 100.0) == segments
+
+
 def test_the_camera_latency_is_the_age_of_the_frames_where_they_are_stamped_when_taken(
     tmp_path,
 ):

@@ -121,7 +121,7 @@ class BallFit:
     @property
     def dropped(self) -> int:
         """The stretches left out as outliers."""
-        return sum(s.follows is None for s in self.problem.segments) - len(self.kept)
+        return sum(s.wall is None for s in self.problem.segments) - len(self.kept)
 
     @property
     def frames(self) -> int:
@@ -198,7 +198,7 @@ def fit_ball(segments: list[BallSegment], replay: BallReplay) -> BallFit:
     problem = BallProblem(segments, replay)
     # A stretch after a bounce starts with the spin the bounce left, which its frames hardly
     # show: it is left to the restitution, which replays the ball through the bounce instead.
-    kept = [i for i, s in enumerate(segments) if s.follows is None]
+    kept = [i for i, s in enumerate(segments) if s.wall is None]
     if not kept:
         raise ValueError("no stretch of the ball's track to fit")
     guess = np.zeros((len(segments), _STATE))

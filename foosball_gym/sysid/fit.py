@@ -20,9 +20,9 @@ from foosball_gym.sysid.logs import LogError, PlayLog, read_logs
 from foosball_gym.sysid.result import SysidResult
 from foosball_gym.sysid.segments import ball_segments, within_budget
 
-#: The most ball time (s) the ball's fit replays: longer logs are drawn from evenly. Five
-#: minutes of calibration serves hold about twice as much.
-BALL_BUDGET_S = 45.0
+#: The most time (s) of the ball's stretches the fit replays whole: longer logs are drawn from
+#: evenly, which bounds the time a fit takes however much is logged.
+BALL_BUDGET_S = 30.0
 #: Fewer drive steps than this do not make a fit.
 MIN_DRIVE_STEPS = 30
 

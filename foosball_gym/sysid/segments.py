@@ -58,8 +58,10 @@ class BallSegment:
         times: its frames' times after ``t0`` (s), the first 0.
         xy: the ball the camera measured in them, (frames, 2).
         follows: the index (among the stretches returned together) of the stretch the ball
-            came from through one wall bounce, straight before this one; None if none.
-        wall: the wall of that bounce, one of :data:`WALLS` (None if none).
+            came from through one wall bounce, straight before this one; None if none was kept
+            (or the bounce was into a corner).
+        wall: the wall of the bounce this stretch begins at, one of :data:`WALLS` or
+            ``"corner"``; None where it begins elsewhere.
     """
 
     log: int
@@ -178,7 +180,6 @@ def _pieces(
         for k, (a, b) in enumerate(pieces):
             if not _replayable(times[a:b], xy[a:b]):
                 continue
-            linked = k == 0 and wall in WALLS and previous is not None
             out.append(
                 BallSegment(
                     log,
@@ -186,8 +187,8 @@ def _pieces(
                     float(times[a]),
                     times[a:b] - times[a],
                     xy[a:b],
-                    follows=previous if linked else None,
-                    wall=wall if linked else None,
+                    follows=previous if k == 0 and wall in WALLS else None,
+                    wall=wall if k == 0 else None,
                 )
             )
             if k == len(pieces) - 1:
@@ -215,27 +216,17 @@ def _still_from(times: np.ndarray, xy: np.ndarray, window: float = 0.25) -> int:
 
 
 def within_budget(segments: list[BallSegment], seconds: float) -> list[BallSegment]:
-    """At most ``seconds`` of the stretches, drawn evenly over the logs: every stretch where
-    there are no more; each drawn with the stretch its bounce links it to, so that bounces stay
-    whole."""
-    if sum(s.duration for s in segments) <= seconds:
-        return segments
-    followed = {s.follows: i for i, s in enumerate(segments) if s.follows is not None}
-    groups, taken = [], set()
-    for i in range(len(segments)):
-        if i not in taken:
-            group = [i] + ([followed[i]] if i in followed else [])
-            taken.update(group)
-            groups.append(group)
-    share = seconds / sum(s.duration for s in segments)
-    chosen = [
-        i
-        for k, group in enumerate(groups)
-        if math.floor((k + 1) * share) > math.floor(k * share)
-        for i in group
-    ]
-    chosen = sorted(set(chosen))
-    index = {old: new for new, old in enumerate(chosen)}
+    """The stretches a fit replays whole (those not beginning at a bounce), at most ``seconds``
+    of them, drawn evenly over the logs; each with the stretch after its bounce, which a fit
+    replays only into (the others after a bounce have nothing to carry the ball in from)."""
+    heads = [i for i, s in enumerate(segments) if s.wall is None]
+    total = sum(segments[i].duration for i in heads)
+    share = min(1.0, seconds / total) if total > 0 else 1.0
+    chosen = {
+        i for k, i in enumerate(heads) if math.floor((k + 1) * share) > math.floor(k * share)
+    }
+    chosen |= {i for i, s in enumerate(segments) if s.follows in chosen}
+    index = {old: new for new, old in enumerate(sorted(chosen))}
     return [
         BallSegment(
             s.log,
@@ -243,8 +234,8 @@ def within_budget(segments: list[BallSegment], seconds: float) -> list[BallSegme
             s.t0,
             s.times,
             s.xy,
-            follows=index.get(s.follows) if s.follows is not None else None,
-            wall=s.wall if s.follows in index else None,
+            follows=index[s.follows] if s.follows is not None else None,
+            wall=s.wall,
         )
-        for s in (segments[i] for i in chosen)
+        for s in (segments[i] for i in sorted(chosen))
     ]
