@@ -222,9 +222,7 @@ def within_budget(segments: list[BallSegment], seconds: float) -> list[BallSegme
     heads = [i for i, s in enumerate(segments) if s.wall is None]
     total = sum(segments[i].duration for i in heads)
     share = min(1.0, seconds / total) if total > 0 else 1.0
-    chosen = {
-        i for k, i in enumerate(heads) if math.floor((k + 1) * share) > math.floor(k * share)
-    }
+    chosen = {i for k, i in enumerate(heads) if math.floor((k + 1) * share) > math.floor(k * share)}
     chosen |= {i for i, s in enumerate(segments) if s.follows in chosen}
     index = {old: new for new, old in enumerate(sorted(chosen))}
     return [
