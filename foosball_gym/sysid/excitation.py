@@ -3,8 +3,8 @@
 ``foosball play MODEL --table sim --serves calibration`` serves these instead of the task's own
 balls (:class:`~foosball_gym.virtual_table.simulated_table.SimulatedTable`), and a person does
 much the same by hand on a real table (docs/system-identification.md). Each ball is put in a
-part of the table no figurine can reach, at 0.6-2.5 m/s across the table, and left to run for
-up to :data:`CALIBRATION_SERVE_S`:
+part of the table no figurine can reach, at 0.6-2.5 m/s across the table or along it, and left
+to run for up to :data:`CALIBRATION_SERVE_S`:
 
 - rolling balls, which show the rolling resistance over the seconds they take to slow down;
 - side and end wall bounces, which show the restitution;
@@ -34,9 +34,10 @@ CALIBRATION_SERVE_S = 4.0
 #: The speeds calibration balls start at (m/s): slow enough to roll for seconds, fast enough to
 #: bounce off a wall or two.
 CALIBRATION_SPEEDS = (0.6, 2.5)
-#: Calibration balls run across the table, at most this many degrees off the side walls'
-#: normal.
+#: Half the calibration balls run across the table, at most this many degrees off the side
+#: walls' normal, and half along it, at most ALONG_ANGLE degrees off its length.
 CROSSING_ANGLE = 60.0
+ALONG_ANGLE = 30.0
 #: The share of calibration balls that start rolling; the others start sliding without spin.
 ROLLING_SHARE = 2 / 3
 #: How far along x from a rod's axis the ball's centre must be for no figurine of the rod to
@@ -89,10 +90,15 @@ def calibration_serve(rng: np.random.Generator, rods: Sequence[str]) -> Calibrat
     else:
         x = 0.0
     y = float(rng.uniform(-1, 1)) * (table.BALL_LIMIT_Y - _SIDE_MARGIN)
-    # Across the table, within CROSSING_ANGLE of the side walls' normal: most balls meet a
-    # side wall, and some an end wall after it.
-    angle = math.radians(float(rng.uniform(-CROSSING_ANGLE, CROSSING_ANGLE)))
-    angle += math.pi / 2 if rng.random() < 0.5 else -math.pi / 2
+    # Half across the table, within CROSSING_ANGLE of the side walls' normal: they meet the
+    # side walls. Half along it, within ALONG_ANGLE of its length: they run longest between
+    # walls, and meet the rods or an end wall.
+    if rng.random() < 0.5:
+        spread, axis = CROSSING_ANGLE, math.pi / 2
+    else:
+        spread, axis = ALONG_ANGLE, 0.0
+    angle = math.radians(float(rng.uniform(-spread, spread))) + axis
+    angle += math.pi if rng.random() < 0.5 else 0.0
     speed = float(rng.uniform(*CALIBRATION_SPEEDS))
     rolling = bool(rng.random() < ROLLING_SHARE)
     velocity = (speed * math.cos(angle), speed * math.sin(angle))
