@@ -1,5 +1,5 @@
-"""The ``foosball`` command: train, eval, dataset, league, play, replay, calibrate, envs,
-migrate.
+"""The ``foosball`` command: train, eval, dataset, league, play, replay, calibrate, sysid,
+envs, migrate.
 
 One module per command, each a thin layer over library functions with ``add_parser`` (its
 options) and ``run`` (parsed options to an exit code); this one assembles the parser and turns
@@ -16,11 +16,11 @@ from collections.abc import Sequence
 
 import foosball_gym
 
-from . import calibrate, dataset, envs, evaluate, league, migrate, play, replay, train
+from . import calibrate, dataset, envs, evaluate, league, migrate, play, replay, sysid, train
 from .common import CliError
 
 # In the order ``foosball --help`` lists them.
-COMMANDS = (train, evaluate, dataset, league, play, replay, calibrate, envs, migrate)
+COMMANDS = (train, evaluate, dataset, league, play, replay, calibrate, sysid, envs, migrate)
 
 __all__ = ["CliError", "build_parser", "main"]
 

@@ -26,6 +26,8 @@ from .common import (
 )
 
 PLAY_SIM = "foosball_gym.play.stack:play_sim"
+# As foosball_gym.sysid.excitation names them (which imports numpy: not at --help).
+SERVE_PATTERNS = ("task", "calibration")
 
 
 class _CameraDefault(LibraryDefault):
@@ -135,6 +137,14 @@ def add_parser(subparsers: Any) -> None:
         "--human)",
     )
     p.add_argument(
+        "--serves",
+        choices=SERVE_PATTERNS,
+        default="task",
+        help="what the simulated table serves: the task's own balls, or 'calibration' balls "
+        "that roll, slide and bounce off the walls for up to 4 s each, for foosball sysid to "
+        "fit the table's physics to (%(default)s)",
+    )
+    p.add_argument(
         "--view",
         choices=("top", "away"),
         help="where the GUI window looks from: top (straight down, the policy's goal on the "
@@ -151,7 +161,19 @@ def add_parser(subparsers: Any) -> None:
 
 
 def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
-    """The policy to play, with the environment it was trained on."""
+    """The policy to play, with the environment it was trained on, whose options are checked
+    as the environment checks them."""
+    policy, env_id, env_kwargs = _chosen_policy(args)
+    from foosball_gym.registration import check_env_options
+
+    try:
+        check_env_options(env_id, env_kwargs)
+    except (ValueError, TypeError) as err:
+        raise CliError(str(err)) from None
+    return policy, env_id, env_kwargs
+
+
+def _chosen_policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
     env_kwargs = parse_env_kwargs(args.env_kwarg)
     if is_scripted(args.model):
         if not args.env:
@@ -227,6 +249,11 @@ def run(args: argparse.Namespace) -> int:
     realtime = args.clock == "realtime" or (args.clock is None and not gui)
     if args.clock and args.table != "sim":
         raise CliError(f"--{args.clock} chooses the simulated table's clock: give --table sim")
+    if args.serves != "task" and args.table != "sim":
+        raise CliError(
+            f"--serves {args.serves} is what the simulated table serves: give --table sim "
+            "(on a real table, serve calibration balls by hand: docs/system-identification.md)"
+        )
     # SIGTERM and SIGHUP stop the table as Ctrl-C does: brake, switch off, then exit.
     restore_signals = catch_termination()
     try:
@@ -246,6 +273,7 @@ def run(args: argparse.Namespace) -> int:
                 # down on a machine that cannot keep up instead of tripping the watchdog.
                 pace=gui and not realtime,
                 view=view,
+                serves=args.serves,
                 **given(args, "seed", "camera_size"),
             )
         else:

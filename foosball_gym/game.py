@@ -135,6 +135,15 @@ class Game:
         self.sim.place_ball(start.ball_position, start.ball_velocity)
         self._begin()
 
+    def put_ball(
+        self, position: tuple[float, float], velocity: tuple[float, float], rolling: bool = False
+    ) -> None:
+        """A new ball where the caller says (a calibration serve: see
+        :mod:`foosball_gym.sysid.excitation`), rolling without slipping or (``rolling`` False)
+        sliding without spin; the rods stay where they are and the score is 0-0."""
+        self.sim.place_ball(position, velocity, rolling=rolling)
+        self._begin()
+
     def _begin(self) -> None:
         self.goals_for = self.goals_against = 0
         self._still_steps = self._dead_steps = 0

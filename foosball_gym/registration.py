@@ -126,6 +126,20 @@ def make_task(
     return task, options
 
 
+def check_env_options(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> None:
+    """Check options as the environment does: by making it (with no window) and closing it.
+
+    Raises:
+        ValueError: ``env_id`` is not registered, or an option has a bad value.
+        TypeError: an option the environment does not take.
+    """
+    check_env_id(env_id)
+    options = dict(env_kwargs or {})
+    if options.get("render_mode") == "human":
+        options["render_mode"] = None  # a valid mode, whose window the check does not need
+    gym.make(env_id, **options).close()
+
+
 def interface_of(task: Task, env_kwargs: Mapping[str, Any]) -> TaskInterface:
     """The task's observation builder and action mapping for the environment's options."""
     options = observation_options(

@@ -28,8 +28,18 @@ MAIN_OPTIONS = {
     "train": ["env_id", "--timesteps", "--n-envs", "--algo", "--out", "--resume", "--env-kwarg"],
     "eval": ["target", "--policy", "--episodes", "--seed", "--opponent", "--json", "--video"],
     "league": ["run", "--add", "--games", "--generations", "--no-scripted", "--out"],
-    "play": ["model", "--table", "--env", "--episodes", "--camera", "--latency", "--log"],
+    "play": [
+        "model",
+        "--table",
+        "--env",
+        "--episodes",
+        "--camera",
+        "--latency",
+        "--log",
+        "--serves",
+    ],
     "calibrate": ["--table", "--frame", "--chessboard", "--pattern", "--square", "--home-side"],
+    "sysid": ["LOG.jsonl", "--json", "--config", "--env", "--plot"],
     "envs": ["registered environments"],
     "migrate": ["RUN", "--trust-model"],
 }
@@ -227,6 +237,20 @@ def config_of(parser, argv):
             marks=[needs_train, needs_hardware],
         ),
         pytest.param(["migrate", "/nonexistent/run"], "--trust-model", marks=needs_train),
+        *(
+            pytest.param(
+                ["play", "scripted", "--env", "Foosball-Block-v0", "--table", "sim"]
+                + ["--env-kwarg", kwarg],
+                message,
+                marks=needs_hardware,
+            )
+            for kwarg, message in (
+                ("foo=1", "BlockEnv has no option 'foo'"),
+                ("ball_restitution_range=(0.4,2)", "ball_restitution_range must satisfy"),
+                ("goal_reward='lots'", "reward weight goal must be a finite number, got 'lots'"),
+                ("rolling_resistance=-1", "rolling_resistance must be a number in [0.0, 0.5]"),
+            )
+        ),
     ],
 )
 def test_a_bad_input_exits_with_status_2_and_one_line_naming_it(

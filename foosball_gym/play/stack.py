@@ -231,6 +231,7 @@ def play_sim(
     pace: bool = False,
     camera_latency_s: float | None = None,
     view: str = "top",
+    serves: str = "task",
 ) -> PlayReport:
     """Play ``episodes`` served balls on the simulated table, through the whole stack.
 
@@ -253,6 +254,10 @@ def play_sim(
     left) or ``"away"`` (from behind the away goal, the person's side); the keys follow it.
 
     Closing the window ends the game after the serve in play.
+
+    ``serves`` is ``"task"`` (the task's own balls) or ``"calibration"``: balls that show the
+    table's physics to ``foosball sysid`` (:mod:`foosball_gym.sysid.excitation`), each played
+    for up to 4 s.
 
     Raises:
         ValueError: ``human`` names no away rod of the task (or the task has no away side).
@@ -280,6 +285,7 @@ def play_sim(
         gui=gui,
         pace=pace,
         view=view,
+        serves=serves,
     )
     if rod is not None:
         keys = table.keyboard_events
@@ -294,7 +300,7 @@ def play_sim(
     report = PlayReport()
     header = _header(interface, config, env_id, env_kwargs)
     on_record, log = _recorders(report, log_path, header, status)
-    max_steps = gym.spec(env_id).max_episode_steps
+    max_steps = table.serve_steps or gym.spec(env_id).max_episode_steps
     assert max_steps is not None  # every id is registered with its time limit
     try:
         # Supervision runs on the table's clock: simulated time in lock-step, where a slow

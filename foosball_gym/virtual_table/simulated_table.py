@@ -40,6 +40,7 @@ import numpy as np
 
 from foosball_gym import table
 from foosball_gym.camera import CameraModel, CameraNoise
+from foosball_gym.envs.options import RANDOMISATION_BOUNDS, check_randomisation
 from foosball_gym.game import Game
 from foosball_gym.hardware.config import (
     MAX_HEARTBEAT_TIMEOUT_S,
@@ -52,6 +53,7 @@ from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
 from foosball_gym.policy_io.task import TaskInterface
 from foosball_gym.registration import interface_of, make_task
 from foosball_gym.sim import TableSim, drive_acceleration
+from foosball_gym.sysid.excitation import CALIBRATION_SERVE_S, calibration_serve, check_serves
 from foosball_gym.virtual_table.camera_process import KEPT_FRAMES, CameraProcess, FrameBuffer
 from foosball_gym.virtual_table.drives import SimulatedDrives
 from foosball_gym.virtual_table.viewer_process import ViewerProcess
@@ -126,6 +128,15 @@ class SimulatedTable:
         gui: show the table in a PyBullet GUI window (needs a display).
         pace: in lock-step, keep steps from running ahead of the wall clock.
         view: where the GUI window looks from (see :data:`foosball_gym.sim.view.VIEWS`).
+        serves: ``"task"``, the task's own balls, or ``"calibration"``, balls that show the
+            table's physics to ``foosball sysid`` (:mod:`foosball_gym.sysid.excitation`),
+            each served for up to :attr:`serve_steps` steps.
+
+    The environment's physics options apply as they do in the environment: ``rolling_resistance``
+    and the simulator's rates, and the domain randomisation ranges (``ball_friction_range``,
+    ``ball_restitution_range``, ``ball_mass_range``, ``drive_gain_range``,
+    ``rolling_resistance_range``), drawn afresh at every serve; a range of one value, such as
+    ``(0.4, 0.4)``, makes a table with that value.
     """
 
     def __init__(
@@ -140,15 +151,24 @@ class SimulatedTable:
         gui: bool = False,
         pace: bool = False,
         view: str = "top",
+        serves: str = "task",
     ) -> None:
         task, options = make_task(env_id, env_kwargs)
         physics = check_physics(*(options.get(k, d) for k, d in PHYSICS_DEFAULTS.items()))
+        self.serves = check_serves(serves)
+        self._randomisation = check_randomisation(
+            {name: options.get(name) for name in RANDOMISATION_BOUNDS}
+        )
+        # Drawn from a generator of their own, so that the serves are the same with or without.
+        self._dynamics_rng = np.random.default_rng([seed, 1])
         stagnation = options.get("stagnation_steps", 0)
         # As the environment checks it.
         if not isinstance(stagnation, (int, np.integer)) or stagnation < 0:
             raise ValueError(f"stagnation_steps must be a non-negative integer, got {stagnation!r}")
         physics_options: dict[str, Any] = dict(zip(PHYSICS_DEFAULTS, physics))
         self.sim = TableSim(task.layout.rods, **physics_options)
+        self._base_gains = (self.sim.slide_gain, self.sim.spin_gain)
+        self.dynamics: dict[str, float] = {}
         self.realtime = bool(realtime)
         self.pace = bool(pace) and not self.realtime
         self._paced_from: float | None = None
@@ -172,6 +192,7 @@ class SimulatedTable:
                 task, interface_of(task, options), self.sim, stagnation_steps=int(stagnation)
             )
             self.rng = np.random.default_rng(seed)
+            self._draw_dynamics()
             self.game.start(task.sample_start(self.rng))
             self.camera_model = CameraModel(*camera_size)
             # The drives watch the master's heartbeat on the table's own clock.
@@ -321,10 +342,45 @@ class SimulatedTable:
             # Behind: the lost time is not made up by running fast afterwards.
             self._paced_from = now - self.time
 
+    @property
+    def serve_steps(self) -> int | None:
+        """The most control steps a serve lasts: None for the task's own (its episode's
+        limit), :data:`~foosball_gym.sysid.excitation.CALIBRATION_SERVE_S` of them for a
+        calibration serve."""
+        if self.serves == "calibration":
+            return round(CALIBRATION_SERVE_S / self.sim.control_dt)
+        return None
+
+    def _draw_dynamics(self) -> None:
+        """This serve's physical parameters, where the options randomise them (as an
+        environment draws them at every reset)."""
+        if not self._randomisation:
+            return
+        drawn = {
+            name.removesuffix("_range"): float(self._dynamics_rng.uniform(*bounds))
+            for name, bounds in self._randomisation.items()
+        }
+        self.sim.set_ball_dynamics(
+            friction=drawn.get("ball_friction"),
+            restitution=drawn.get("ball_restitution"),
+            mass=drawn.get("ball_mass"),
+            rolling_resistance=drawn.get("rolling_resistance"),
+        )
+        if "drive_gain" in drawn:
+            slide, spin = self._base_gains
+            self.sim.set_drive_gains(slide * drawn["drive_gain"], spin * drawn["drive_gain"])
+        self.dynamics = drawn
+
     def serve(self) -> None:
-        """A new ball, as the task starts its episodes; the rods stay where they are."""
+        """A new ball, as the task starts its episodes (or a calibration ball); the rods stay
+        where they are."""
         with self._lock:
-            self.game.serve(self.rng)
+            self._draw_dynamics()
+            if self.serves == "calibration":
+                ball = calibration_serve(self.rng, self.game.task.layout.rods)
+                self.game.put_ball(ball.position, ball.velocity, ball.rolling)
+            else:
+                self.game.serve(self.rng)
             # What the clock reported of the old ball since the last step is no news of this one.
             self._events.clear()
             self._stagnated = self._dead = False
