@@ -4,6 +4,7 @@ score."""
 from __future__ import annotations
 
 import math
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -84,6 +85,21 @@ def test_the_planned_shot_is_the_one_clearance_judges_best_to_the_last_bit():
             for _ in range(rng.integers(0, 5))
         ]
         assert plan_shot(x0, y0, blockers) == _plan_shot_one_angle_at_a_time(x0, y0, blockers)
+
+
+def test_a_ball_pressed_beyond_the_walls_line_is_not_shot_along_a_path_that_overflows():
+    # Met in a full game: the ball 3 mm past the line where it touches the wall, its straight
+    # lane blocked. A flat shot away from the wall bounces on for ever, behind the ball; its
+    # margin was NaN, which argmax takes for the best, with overflow warnings printed.
+    x0, y0 = 0.23337608575820923, -0.3258601129055023
+    blockers = [(0.522, (-0.1167,)), (0.37295, (-0.0474, -0.2944)), (0.6, (-0.33, -0.3))]
+    flat = 0.016786885245901644
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert clearance(x0, y0, flat, blockers) == -math.inf
+        angle = plan_shot(x0, y0, blockers)
+    assert math.isfinite(clearance(x0, y0, angle, blockers))
+    assert angle == _plan_shot_one_angle_at_a_time(x0, y0, blockers)
 
 
 def test_the_offset_grows_with_the_angle_and_keeps_its_sign():

@@ -83,7 +83,8 @@ def clearance(
     for (_, fys), y in zip(ahead, ys):
         for fy in fys:
             margin = min(margin, abs(y - fy) - _BLOCK)
-    return margin
+    # A path that overflowed (see _clearances) passes nothing.
+    return -math.inf if math.isnan(margin) else margin
 
 
 def plan_shot(
@@ -122,21 +123,26 @@ def _clearances(
     x = np.full_like(slope, x0)
     y = np.full_like(slope, y0)
     ys = []
-    for target in xs:
-        while True:
-            reach = y + slope * (target - x)
-            over = (np.abs(reach) > _WALL) & (slope != 0)
-            if not over.any():
-                break
-            wall = np.copysign(_WALL, slope[over])
-            x[over] += (wall - y[over]) / slope[over]
-            y[over] = wall
-            slope[over] = -slope[over] * _WALL_RESTITUTION
-        ys.append(reach)
-        x = np.full_like(slope, target)
-        y = reach.copy()
+    # A ball a little beyond the walls' line (pressed into a wall) shot at a flat angle away
+    # from it bounces on for ever, ever further behind: the path overflows, as Python's
+    # floats do in clearance(), and its margin is NaN, which counts as blocked below.
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        for target in xs:
+            while True:
+                reach = y + slope * (target - x)
+                over = (np.abs(reach) > _WALL) & (slope != 0)
+                if not over.any():
+                    break
+                wall = np.copysign(_WALL, slope[over])
+                x[over] += (wall - y[over]) / slope[over]
+                y[over] = wall
+                slope[over] = -slope[over] * _WALL_RESTITUTION
+            ys.append(reach)
+            x = np.full_like(slope, target)
+            y = reach.copy()
     margin = _GOAL - np.abs(ys[-1])
     for (_, fys), y in zip(ahead, ys):
         for fy in fys:
             margin = np.minimum(margin, np.abs(y - fy) - _BLOCK)
-    return margin
+    # A NaN would be the largest margin to argmax, and the shot chosen.
+    return np.where(np.isnan(margin), -np.inf, margin)
