@@ -4,10 +4,21 @@ task's interface, options and all, where pybullet may not be installed)."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 from foosball_gym import table
+from foosball_gym.tasks.serves import check_range
+
+#: Each domain randomisation option, with the bounds its range must keep.
+RANDOMISATION_BOUNDS = {
+    "ball_friction_range": (0.0, 10.0),
+    "ball_restitution_range": (0.0, 1.0),
+    "ball_mass_range": (1e-4, 1.0),
+    "drive_gain_range": (1e-3, 10.0),
+    "rolling_resistance_range": (0.0, 0.5),
+}
 
 
 def check_physics(
@@ -69,3 +80,12 @@ PHYSICS_DEFAULTS = {
     "contact_travel": table.CONTACT_TRAVEL,
     "rolling_resistance": table.ROLLING_RESISTANCE,
 }
+
+
+def check_randomisation(ranges: dict[str, Any]) -> dict[str, tuple[float, float]]:
+    """The domain randomisation options that are on (not None), each a checked range."""
+    return {
+        name: check_range(name, value, *RANDOMISATION_BOUNDS[name])
+        for name, value in ranges.items()
+        if value is not None
+    }

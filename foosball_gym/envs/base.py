@@ -23,6 +23,7 @@ from foosball_gym.envs.estimated import CameraNoise, EstimatedState
 from foosball_gym.envs.options import RENDER_MODES
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
 from foosball_gym.game import Game, Outcome, Policy, portable, unpacked
+from foosball_gym.physics_options import check_randomisation
 from foosball_gym.policy_io.observations import check_flag, observation_options
 from foosball_gym.policy_io.task import TaskInterface, check_action, residual_action
 from foosball_gym.tasks.base import Task, check_ball_position, check_ball_velocity
@@ -220,7 +221,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self.observation_options = self.interface.builder.options
         self.obs_builder = self.interface.builder
         self.observation_space = self.obs_builder.space
-        self.randomisation = env_options.check_randomisation(
+        self.randomisation = check_randomisation(
             {
                 "ball_friction_range": ball_friction_range,
                 "ball_restitution_range": ball_restitution_range,

@@ -21,18 +21,9 @@ from typing import Any
 import numpy as np
 
 from foosball_gym.camera import check_image_side
-from foosball_gym.tasks.serves import check_range
 
 RENDER_MODES = ("human", "rgb_array")
 RESIDUAL_LIMIT = 2.0
-#: Each domain randomisation option, with the bounds its range must keep.
-RANDOMISATION_BOUNDS = {
-    "ball_friction_range": (0.0, 10.0),
-    "ball_restitution_range": (0.0, 1.0),
-    "ball_mass_range": (1e-4, 1.0),
-    "drive_gain_range": (1e-3, 10.0),
-    "rolling_resistance_range": (0.0, 0.5),
-}
 
 
 def check_residual(value: Any, n_actions: int | None = None) -> float | tuple[float, ...]:
@@ -94,15 +85,6 @@ def check_stagnation(value: Any) -> int:
     if not isinstance(value, (int, np.integer)) or value < 0:
         raise ValueError(f"stagnation_steps must be a non-negative integer, got {value!r}")
     return int(value)
-
-
-def check_randomisation(ranges: dict[str, Any]) -> dict[str, tuple[float, float]]:
-    """The domain randomisation options that are on (not None), each a checked range."""
-    return {
-        name: check_range(name, value, *RANDOMISATION_BOUNDS[name])
-        for name, value in ranges.items()
-        if value is not None
-    }
 
 
 # ---------------------------------------------------------------- what a class says

@@ -40,7 +40,6 @@ import numpy as np
 
 from foosball_gym import table
 from foosball_gym.camera import CameraModel, CameraNoise
-from foosball_gym.envs.options import RANDOMISATION_BOUNDS, check_randomisation
 from foosball_gym.game import Game
 from foosball_gym.hardware.config import (
     MAX_HEARTBEAT_TIMEOUT_S,
@@ -49,7 +48,12 @@ from foosball_gym.hardware.config import (
     JointConfig,
     TableConfig,
 )
-from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
+from foosball_gym.physics_options import (
+    PHYSICS_DEFAULTS,
+    RANDOMISATION_BOUNDS,
+    check_physics,
+    check_randomisation,
+)
 from foosball_gym.policy_io.task import TaskInterface
 from foosball_gym.registration import interface_of, make_task
 from foosball_gym.sim import TableSim, drive_acceleration
