@@ -356,20 +356,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         """Draw this episode's physical parameters where randomisation is on."""
         if not self.randomisation:
             return {}
-        drawn = {
-            name[: -len("_range")]: float(self.np_random.uniform(*bounds))
-            for name, bounds in self.randomisation.items()
-        }
-        self.sim.set_ball_dynamics(
-            friction=drawn.get("ball_friction"),
-            restitution=drawn.get("ball_restitution"),
-            mass=drawn.get("ball_mass"),
-            rolling_resistance=drawn.get("rolling_resistance"),
-        )
-        if "drive_gain" in drawn:
-            slide, spin = self._base_gains
-            self.sim.set_drive_gains(slide * drawn["drive_gain"], spin * drawn["drive_gain"])
-        return drawn
+        return self.sim.draw_dynamics(self.randomisation, self.np_random, self._base_gains)
 
     def _start(self, start) -> None:
         game = self.game

@@ -202,6 +202,31 @@ class TableSim:
         self._gains = (float(slide_gain), float(spin_gain))
         self._drives.set_gains([self._gains[0]] * self._n + [self._gains[1]] * self._n)
 
+    def draw_dynamics(
+        self,
+        ranges: dict[str, tuple[float, float]],
+        rng: np.random.Generator,
+        base_gains: tuple[float, float],
+    ) -> dict[str, float]:
+        """Draw and set the physical parameters the domain randomisation ``ranges`` give (the
+        options named ``*_range``, checked), one uniform draw each in their order; returns the
+        values drawn under their quantities' names. ``drive_gain`` is a factor on
+        ``base_gains`` (slide, spin)."""
+        drawn = {
+            name.removesuffix("_range"): float(rng.uniform(*bounds))
+            for name, bounds in ranges.items()
+        }
+        self.set_ball_dynamics(
+            friction=drawn.get("ball_friction"),
+            restitution=drawn.get("ball_restitution"),
+            mass=drawn.get("ball_mass"),
+            rolling_resistance=drawn.get("rolling_resistance"),
+        )
+        if "drive_gain" in drawn:
+            slide, spin = base_gains
+            self.set_drive_gains(slide * drawn["drive_gain"], spin * drawn["drive_gain"])
+        return drawn
+
     def set_ball_dynamics(
         self,
         *,

@@ -360,20 +360,9 @@ class SimulatedTable:
         environment draws them at every reset)."""
         if not self._randomisation:
             return
-        drawn = {
-            name.removesuffix("_range"): float(self._dynamics_rng.uniform(*bounds))
-            for name, bounds in self._randomisation.items()
-        }
-        self.sim.set_ball_dynamics(
-            friction=drawn.get("ball_friction"),
-            restitution=drawn.get("ball_restitution"),
-            mass=drawn.get("ball_mass"),
-            rolling_resistance=drawn.get("rolling_resistance"),
+        self.dynamics = self.sim.draw_dynamics(
+            self._randomisation, self._dynamics_rng, self._base_gains
         )
-        if "drive_gain" in drawn:
-            slide, spin = self._base_gains
-            self.sim.set_drive_gains(slide * drawn["drive_gain"], spin * drawn["drive_gain"])
-        self.dynamics = drawn
 
     def serve(self) -> None:
         """A new ball, as the task starts its episodes (or a calibration ball); the rods stay
