@@ -105,6 +105,8 @@ class ScriptedTeam:
             ball bounces off towards the goal (``policies.deflection``; past the figurines the
             observation places, with ``aim``). Where no placement does, a ball is volleyed
             (with ``volley``) or blocked.
+        guard_mouth: the keeper stays in front of its goal's mouth (:func:`guarded_target`)
+            instead of following a ball that will pass beside it.
     """
 
     def __init__(
@@ -116,6 +118,7 @@ class ScriptedTeam:
         volley: bool = False,
         aim: bool = False,
         deflect: bool = False,
+        guard_mouth: bool = False,
     ) -> None:
         if joints not in ("slide", "both"):
             raise ValueError(f"joints must be 'slide' or 'both', got {joints!r}")
@@ -134,6 +137,7 @@ class ScriptedTeam:
             self._own.append((names.index(slide), names.index(spin)) if ok else None)
         self.n_actions = len(self.rods) * (2 if joints == "both" else 1)
         self.aim = aim and self.kick
+        self.guard_mouth = guard_mouth
         # The other team's rods the observation places, as the home side sees them.
         other = table.HOME if str(rods[0]).startswith(table.AWAY) else table.AWAY
         self._blockers = []
@@ -168,7 +172,10 @@ class ScriptedTeam:
             move = self._deflection(rod, float(obs[own[0]]), x, y, vx, vy, obs)
             if move is not None:
                 return move
-        target = self.target_y(rod, x, y, vx, vy)
+        if self.guard_mouth and rod.role == "keeper":
+            target = guarded_target(rod, x, y, vx, vy)
+        else:
+            target = self.target_y(rod, x, y, vx, vy)
         offset = 0.0
         if self.aim and self._in_reach(rod, x, vx, vy):
             offset = offset_for_angle(plan_shot(x, y, self._blocker_positions(obs)))
@@ -270,6 +277,39 @@ class ScriptedTeam:
         if ahead < -_REACH_NEAR and vx > 0.3 and rod.role != "keeper":
             return WIND_UP_ANGLE
         return 0.0
+
+
+# GUARD_EDGE: the farthest (|y|, m) a guarding keeper goes for a ball that will pass beside the
+# mouth; CLEAR: how far (m) its figurine keeps from where a ball behind it will cross its line.
+GUARD_EDGE = 0.06
+CLEAR = 0.07
+
+
+def guarded_target(rod: table.Rod, x: float, y: float, vx: float, vy: float) -> float:
+    """Where a keeper that guards its mouth puts its figurine.
+
+    A ball that will pass beside the mouth meets the end wall there and comes back: a keeper
+    that followed it to the end of its slide stands in its way, and the ball, struck by the
+    back of the figurine, goes in (the wide shots' one way past the scripted keeper). So the
+    keeper goes no farther than GUARD_EDGE towards such a ball, and keeps out of the way of a
+    ball behind it.
+    """
+    if x < rod.x:
+        if vx < 0.0:
+            # On to the end wall first, and back off it at the wall's restitution.
+            y = y + vy * (x + table.BALL_LIMIT_X) / -vx
+            x, vx = -table.BALL_LIMIT_X, -vx * table.BALL_TABLE_RESTITUTION
+        cross = crossing_y(x, y, vx, vy, rod.x) if vx > 0.05 else None
+        cross = y if cross is None else cross
+        return cross - math.copysign(CLEAR, cross)
+    if vx < -0.05:
+        cross = crossing_y(x, y, vx, vy, rod.x)
+        goal = crossing_y(x, y, vx, vy, -table.GOAL_LINE_X)
+        if cross is not None and goal is not None:
+            if abs(goal) > table.GOAL_HALF_WIDTH and abs(cross) > GUARD_EDGE:
+                return math.copysign(GUARD_EDGE, cross)
+            return cross
+    return y
 
 
 def slide_for(rod: table.Rod, y: float) -> float:

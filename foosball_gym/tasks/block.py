@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from foosball_gym import table
+from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start, Task
 from foosball_gym.tasks.serves import Shots
@@ -22,8 +24,21 @@ class BlockTask(Task):
         serve_x_range: tuple[float, float] = (0.0, 0.4),
         serve_y_range: tuple[float, float] = (-0.3, 0.3),
         bank_share: float = 0.0,
+        double_bank_share: float = 0.0,
+        bank_aim: str = "model",
+        beside_mouth: float = 0.0,
+        rebound_share: float = 0.0,
     ) -> None:
-        self.shots = Shots.checked(speed_range, serve_x_range, serve_y_range, bank_share)
+        self.shots = Shots.checked(
+            speed_range,
+            serve_x_range,
+            serve_y_range,
+            bank_share,
+            double_bank_share,
+            bank_aim,
+            beside_mouth,
+            rebound_share,
+        )
         self.layout = Layout(controlled=("home_keeper",), joints="slide")
 
     def sample_start(
@@ -40,6 +55,9 @@ class BlockTask(Task):
         if ball_velocity is not None:
             velocity = ball_velocity
         return Start([0.0], [0.0], position, velocity)
+
+    def scripted_policy(self, names: Sequence[str], precise_state: bool = True) -> ScriptedTeam:
+        return ScriptedTeam(names, self.layout.controlled, self.layout.joints, guard_mouth=True)
 
     def success(self, goals_for: int, goals_against: int) -> bool:
         return goals_against == 0

@@ -82,22 +82,46 @@ def check_share(name: str, value: Any) -> float:
     return share
 
 
+BANK_AIMS = ("model", "mirror")
+# A ball that meets a figurine of the defence keeps about this share of its speed: the
+# figurines' restitution (0.5) head-on, more at a glancing touch.
+REBOUND_SPEED_SHARE = 0.25
+# Where a ball coming back off the own defence starts (defender's frame): just goal-side of
+# the defence rod's figurines, at any y their slides reach.
+REBOUND_X = table.rod(f"{table.HOME}_defense").x - 0.5 * table.FIGURINE_SIZE[0] - table.BALL_RADIUS
+REBOUND_X_JITTER = 0.02
+# How far beside the mouth (m, beyond each post's line) a shot may be aimed: wider ones no
+# longer come back along the end wall to the mouth.
+BESIDE_MOUTH_LIMIT = 0.1
+
+
 @dataclass(frozen=True)
 class Shots:
     """Shots at a goal: where they start, how fast they go, and how many bank off a wall.
 
     Positions are in the frame of a defender at the home goal (x = -0.617): ``x_range`` and
     ``y_range`` bound a uniform start, ``speed_range`` a uniform speed. A share ``bank_share``
-    of the shots is aimed off a side wall (either, at random) at a uniform point of the middle
-    of the goal mouth; the others go straight at a uniform point of all of it. With
-    ``bank_share == 0`` the draws are those of the plain shot, so seeded serves stay what they
-    were before banks existed.
+    of the shots is aimed off a side wall (either, at random), a share ``double_bank_share``
+    off both; the others go straight. A straight shot goes at a uniform point of the mouth
+    widened by ``beside_mouth`` beyond each post (a shot beside the mouth meets the end wall
+    beside the goal). A bank is aimed at the middle of the mouth allowing for how the
+    simulated wall flattens the path (``bank_aim="model"``), or as a player aims it, by equal
+    angles in and out, at the same widened mouth (``"mirror"``). A share ``rebound_share`` of
+    the balls instead comes back off the defender's own defence: from just in front of the
+    defence rod at a uniform y, at a uniform point of the widened mouth, at
+    ``REBOUND_SPEED_SHARE`` of a speed from ``speed_range``. With every new share and
+    ``beside_mouth`` at 0 the draws are those of the plain shot, so seeded serves stay what
+    they were.
     """
 
     speed_range: tuple[float, float] = (2.0, 7.0)
     x_range: tuple[float, float] = (0.0, 0.4)
     y_range: tuple[float, float] = (-0.3, 0.3)
     bank_share: float = 0.0
+    double_bank_share: float = 0.0
+    bank_aim: str = "model"
+    beside_mouth: float = 0.0
+    rebound_share: float = 0.0
 
     @classmethod
     def checked(
@@ -106,43 +130,135 @@ class Shots:
         x_range: Any,
         y_range: Any,
         bank_share: Any,
+        double_bank_share: Any = 0.0,
+        bank_aim: Any = "model",
+        beside_mouth: Any = 0.0,
+        rebound_share: Any = 0.0,
     ) -> Shots:
         """Shots from user options, or a ValueError naming the bad one and what is allowed."""
+        bank = check_share("bank_share", bank_share)
+        double = check_share("double_bank_share", double_bank_share)
+        if bank + double > 1.0:
+            raise ValueError(
+                f"bank_share + double_bank_share must be at most 1, got {bank} + {double}"
+            )
+        try:
+            beside = float(beside_mouth)
+        except (TypeError, ValueError):
+            beside = math.nan
+        if isinstance(beside_mouth, bool) or not 0.0 <= beside <= BESIDE_MOUTH_LIMIT:
+            raise ValueError(
+                f"beside_mouth must be a number in [0, {BESIDE_MOUTH_LIMIT}] m, got {beside_mouth!r}"
+            )
         return cls(
             check_range("speed_range", speed_range, *SHOT_SPEED_LIMITS),
             check_range("serve_x_range", x_range, *SERVE_X_LIMITS),
             check_range("serve_y_range", y_range, *SERVE_Y_LIMITS),
-            check_share("bank_share", bank_share),
+            bank,
+            double,
+            check_choice("bank_aim", bank_aim, BANK_AIMS),
+            beside,
+            check_share("rebound_share", rebound_share),
         )
 
     def start(
         self, rng: np.random.Generator, defender: str = table.HOME
     ) -> tuple[tuple[float, float], tuple[float, float]]:
         """A start position and the shot from it at ``defender``'s goal."""
+        if self.rebound_share and rng.uniform() < self.rebound_share:
+            return self.rebound(rng, defender)
         position = (float(rng.uniform(*self.x_range)), float(rng.uniform(*self.y_range)))
         if defender == table.AWAY:
             position = (-position[0], -position[1])
         return position, self.aim(rng, position, defender)
 
+    def rebound(
+        self, rng: np.random.Generator, defender: str = table.HOME
+    ) -> tuple[tuple[float, float], tuple[float, float]]:
+        """A ball coming back off ``defender``'s own defence towards its goal."""
+        x = REBOUND_X + float(rng.uniform(-REBOUND_X_JITTER, REBOUND_X_JITTER))
+        y = float(rng.uniform(-table.BALL_LIMIT_Y, table.BALL_LIMIT_Y))
+        target_y = self._target(rng)
+        speed = REBOUND_SPEED_SHARE * float(rng.uniform(*self.speed_range))
+        dx, dy = -table.GOAL_LINE_X - x, target_y - y
+        norm = math.hypot(dx, dy)
+        vx, vy = speed * dx / norm, speed * dy / norm
+        if defender == table.AWAY:
+            return (-x, -y), (-vx, -vy)
+        return (x, y), (vx, vy)
+
+    def _target(self, rng: np.random.Generator) -> float:
+        half = table.GOAL_MOUTH_HALF + self.beside_mouth
+        return float(rng.uniform(-half, half))
+
     def aim(
         self, rng: np.random.Generator, position: tuple[float, float], defender: str
     ) -> tuple[float, float]:
         """The velocity of a shot from ``position`` at ``defender``'s goal mouth."""
-        if self.bank_share == 0.0 or rng.uniform() >= self.bank_share:
-            return shot_at_goal(rng, position, self.speed_range, defender)
-        side = 1.0 if rng.uniform() < 0.5 else -1.0
-        target_y = float(rng.uniform(-BANK_AIM_HALF, BANK_AIM_HALF))
-        speed = float(rng.uniform(*self.speed_range))
+        banks = self.bank_share + self.double_bank_share
+        draw = rng.uniform() if banks else 1.0
+        if draw >= banks:
+            return self._straight(rng, position, defender)
         flip = 1.0 if defender == table.HOME else -1.0
         x, y = flip * position[0], flip * position[1]
+        side = 1.0 if rng.uniform() < 0.5 else -1.0
+        if draw >= self.bank_share:
+            aimed = self._mirror(rng, x, y, side, walls=2)
+        elif self.bank_aim == "mirror":
+            aimed = self._mirror(rng, x, y, side, walls=1)
+        else:
+            aimed = self._modelled_bank(rng, x, y, side)
+        if aimed is None:
+            return self._straight(rng, position, defender)
+        vx, vy = aimed
+        return flip * vx, flip * vy
+
+    def _straight(
+        self, rng: np.random.Generator, position: tuple[float, float], defender: str
+    ) -> tuple[float, float]:
+        if self.beside_mouth == 0.0:
+            return shot_at_goal(rng, position, self.speed_range, defender)
+        goal_x = -table.GOAL_LINE_X if defender == table.HOME else table.GOAL_LINE_X
+        target_y = self._target(rng)
+        speed = float(rng.uniform(*self.speed_range))
+        dx, dy = goal_x - position[0], target_y - position[1]
+        norm = math.hypot(dx, dy)
+        return speed * dx / norm, speed * dy / norm
+
+    def _modelled_bank(
+        self, rng: np.random.Generator, x: float, y: float, side: float
+    ) -> tuple[float, float] | None:
+        """A bank off the wall at ``side`` aimed with the simulated wall's flattening, in the
+        home defender's frame; None where neither wall takes it."""
+        target_y = float(rng.uniform(-BANK_AIM_HALF, BANK_AIM_HALF))
+        speed = float(rng.uniform(*self.speed_range))
         slope = bank_slope(x, y, target_y - side * BANK_AIM_OFFSET, side)
         if slope is None:
             side = -side  # that wall needs too steep a shot: bank off the other
             slope = bank_slope(x, y, target_y - side * BANK_AIM_OFFSET, side)
         if slope is None:
-            return shot_at_goal(rng, position, self.speed_range, defender)
+            return None
         norm = math.hypot(1.0, slope)
-        return flip * -speed / norm, flip * side * speed * slope / norm
+        return -speed / norm, side * speed * slope / norm
+
+    def _mirror(
+        self, rng: np.random.Generator, x: float, y: float, side: float, walls: int
+    ) -> tuple[float, float] | None:
+        """A shot off ``walls`` side walls (the first at ``side``) aimed as a player aims it:
+        straight at the target's mirror image, in the home defender's frame; None where both
+        first walls need a shot steeper than BANK_MAX_ANGLE."""
+        target_y = self._target(rng)
+        speed = float(rng.uniform(*self.speed_range))
+        run = x + table.GOAL_LINE_X
+        for first in (side, -side):
+            wall = first * table.BALL_LIMIT_Y
+            # Unfolded: the image over the first wall, or over the second and then the first.
+            image = 2 * wall - target_y if walls == 1 else target_y + 4 * wall
+            rise = image - y
+            if run > 0 and math.degrees(math.atan2(abs(rise), run)) <= BANK_MAX_ANGLE:
+                norm = math.hypot(run, rise)
+                return -speed * run / norm, speed * rise / norm
+        return None
 
 
 def bank_slope(x: float, y: float, target_y: float, side: float) -> float | None:
