@@ -111,3 +111,45 @@ def test_scripted_team_lifts_its_feet_for_its_own_shots_and_shoots_a_ball_in_rea
     a = team(np.array([0.05, 0.0, rod.x + 0.05, y, 0.0, 0.0], np.float32))
     assert a[1] * table.SPIN_LIMIT == pytest.approx(WIND_UP_ANGLE)
     assert a[0] * rod.slide_limit == pytest.approx(0.0, abs=1e-6)
+
+
+ANY_SHOT = {
+    "speed_range": (2.0, 12.0),
+    "serve_x_range": (-0.1, 0.45),
+    "serve_y_range": (-table.BALL_LIMIT_Y, table.BALL_LIMIT_Y),
+    "bank_share": 0.3,
+    "bank_aim": "mirror",
+    "double_bank_share": 0.1,
+    "beside_mouth": 0.03,
+    "rebound_share": 0.1,
+}
+
+
+def test_guarding_keeper_lets_a_ball_beside_the_mouth_come_back_off_the_end_wall():
+    """A bank that passes the keeper beside the mouth comes back off the end wall: a keeper
+    that followed it to the end of its slide is struck in the back and knocks it in."""
+    env = gym.make("Foosball-Block-v0")
+    names = env.unwrapped.obs_builder.names
+    goals = {}
+    try:
+        for guard in (True, False):
+            keeper = ScriptedKeeper(names, guard_mouth=guard)
+            obs, info = env.reset(
+                seed=0, options={"ball_position": (0.426, -0.189), "ball_velocity": (-2.63, 2.09)}
+            )
+            done = False
+            while not done:
+                obs, _, terminated, truncated, info = env.step(keeper(obs))
+                done = terminated or truncated
+            goals[guard] = info["goal"]
+    finally:
+        env.close()
+    assert goals == {True: 0, False: -1}
+
+
+def test_scripted_keeper_blocks_any_shot_a_player_plays():
+    env = gym.make("Foosball-Block-v0", **ANY_SHOT)
+    keeper = env.unwrapped.scripted_policy()
+    env.close()
+    assert isinstance(keeper, ScriptedKeeper)
+    assert block_rate(keeper, 100, **ANY_SHOT) >= 0.97  # 497 of 500 measured

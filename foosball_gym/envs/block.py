@@ -44,10 +44,19 @@ class BlockEnv(FoosballEnv):
     and is shot at a uniform point of the home goal mouth (a goal if nothing stops it), at a
     speed drawn from `speed_range`. A share `bank_share` of the shots is aimed off a side
     wall instead, at the middle of the mouth, allowing for how the simulated wall flattens the
-    path (with the keeper out of the way, 299 of 300 such shots score). What a real opponent
-    plays, and what `builtin:block` was trained on, is the wide distribution
-    `speed_range=(2, 10), serve_x_range=(-0.1, 0.45), serve_y_range=(-0.32275, 0.32275),
-    bank_share=0.5`.
+    path (with the keeper out of the way, 299 of 300 such shots score); with
+    `bank_aim="mirror"` they are aimed as a player aims them, by equal angles in and out. A
+    share `double_bank_share` is aimed off both side walls, as a player aims. `beside_mouth`
+    widens where straight, mirrored and double shots are aimed beyond each post: those meet
+    the end wall beside the goal and come back. A share `rebound_share` of the balls comes back
+    off the keeper's own defence instead: from just in front of the defence rod, at any y, at
+    a quarter of a speed from `speed_range` (the shot's speed after the keeper's and the
+    defence's figurines, restitution 0.5 each), aimed at the mouth as widened.
+    What a real opponent plays, and what `builtin:block` was trained on, is the distribution
+    of any shot ("Shots a real opponent plays" in the environments' documentation):
+    `speed_range=(2, 12), serve_x_range=(-0.1, 0.45), serve_y_range=(-0.32275, 0.32275),
+    bank_share=0.3, bank_aim="mirror", double_bank_share=0.1, beside_mouth=0.03,
+    rebound_share=0.1`.
     `reset(options={"ball_position": (x, y), "ball_velocity": (vx, vy)})` places the ball
     exactly (at most 20 m/s); with only a position, the shot is aimed from there.
 
@@ -64,6 +73,13 @@ class BlockEnv(FoosballEnv):
     - `serve_y_range`: where across the table the ball starts, `(low, high)` in m; within
       [-0.32275, 0.32275].
     - `bank_share`: the share of the shots aimed off a side wall, in [0, 1].
+    - `bank_aim`: how those are aimed: `"model"` at the middle of the mouth allowing for the
+      simulated wall's flattening, `"mirror"` by equal angles, as a player aims.
+    - `double_bank_share`: the share of the shots aimed off both side walls, in [0, 1];
+      with `bank_share` at most 1.
+    - `beside_mouth`: how far beyond each post (m, in [0, 0.1]) straight, mirrored and double
+      shots may be aimed.
+    - `rebound_share`: the share of the balls that come back off the own defence, in [0, 1].
 
     The other arguments are those every environment takes, described under
     [FoosballEnv][foosball_gym.envs.base.FoosballEnv]. Block has no opponent:
@@ -77,6 +93,8 @@ class BlockEnv(FoosballEnv):
       v0 always served, seed for seed.
     - v0: the options are the class's keyword arguments; `opponent`, which Block took only
       as `None`, is no longer one.
+    - v0: `bank_aim`, `double_bank_share`, `beside_mouth` and `rebound_share`; their defaults
+      serve what v0 always served, seed for seed.
     """
 
     def __init__(

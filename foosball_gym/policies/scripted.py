@@ -330,9 +330,14 @@ class ScriptedKeeper(ScriptedTeam):
         names: the observation's entry names.
         n_actions: 1 (prismatic) or 2 (prismatic, revolute).
         kick: swing at balls in reach (with 2 actions).
+        guard_mouth: stay in front of the mouth rather than follow a ball that will pass
+            beside it (:func:`guarded_target`).
     """
 
-    def __init__(self, names: Sequence[str], n_actions: int = 1, kick: bool = True) -> None:
+    def __init__(
+        self, names: Sequence[str], n_actions: int = 1, kick: bool = True, guard_mouth: bool = True
+    ) -> None:
         if n_actions not in (1, 2):
             raise ValueError(f"n_actions must be 1 or 2, got {n_actions}")
-        super().__init__(names, ("home_keeper",), "slide" if n_actions == 1 else "both", kick)
+        joints = "slide" if n_actions == 1 else "both"
+        super().__init__(names, ("home_keeper",), joints, kick, guard_mouth=guard_mouth)

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table
-from foosball_gym.policies.scripted import ScriptedTeam
+from foosball_gym.policies.scripted import ScriptedKeeper
 from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start, Task
 from foosball_gym.tasks.serves import Shots
@@ -56,8 +56,8 @@ class BlockTask(Task):
             velocity = ball_velocity
         return Start([0.0], [0.0], position, velocity)
 
-    def scripted_policy(self, names: Sequence[str], precise_state: bool = True) -> ScriptedTeam:
-        return ScriptedTeam(names, self.layout.controlled, self.layout.joints, guard_mouth=True)
+    def scripted_policy(self, names: Sequence[str], precise_state: bool = True) -> ScriptedKeeper:
+        return ScriptedKeeper(names)
 
     def success(self, goals_for: int, goals_against: int) -> bool:
         return goals_against == 0
