@@ -98,6 +98,11 @@ class CameraNoise:
         hide_under_figurines: the ball is not seen while a figurine's head covers it.
         latency_s: from the frame to the drives acting (s); the filter predicts this far
             ahead, as on the real table.
+        latency_jitter_s: each frame is late by a further uniform draw from
+            [0, latency_jitter_s] (s), as a real camera's transfer and a busy computer make
+            it; frames still reach the filter in the order they were taken (a frame through
+            early waits for the one before it), and the filter still predicts ``latency_s``
+            ahead.
     """
 
     fps: float = 60.0
@@ -106,6 +111,7 @@ class CameraNoise:
     drop_rate: float = 0.02
     hide_under_figurines: bool = True
     latency_s: float = 0.03
+    latency_jitter_s: float = 0.0
 
     @classmethod
     def from_dict(cls, values: dict[str, Any] | None) -> CameraNoise:
@@ -123,9 +129,16 @@ class CameraNoise:
                 raise ValueError(
                     f"camera_noise {name} must be positive, got {getattr(noise, name)}"
                 )
-        for name in ("position_std", "rod_std", "latency_s"):
-            if getattr(noise, name) < 0:
-                raise ValueError(f"camera_noise {name} must not be negative")
+        for name in ("position_std", "rod_std", "latency_s", "latency_jitter_s"):
+            value = getattr(noise, name)
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                number = math.nan
+            if isinstance(value, bool) or not 0 <= number < math.inf:
+                raise ValueError(
+                    f"camera_noise {name} must be a finite number, 0 or more, got {value!r}"
+                )
         if not 0 <= noise.drop_rate < 1:
             raise ValueError(f"camera_noise drop_rate must lie in [0, 1), got {noise.drop_rate}")
         return noise

@@ -66,6 +66,9 @@ class Game:
             in ``task.layout.rods`` order, as of the last serve or step.
         ball: the ball's x, y, vx, vy then.
         goals_for, goals_against: goals since the last serve.
+        own_offsets: None, or per entry of the learner's action, how far its reading of that
+            joint is off (a miscalibrated table): the joint is driven that much short of the
+            target the action asks for.
     """
 
     def __init__(
@@ -103,6 +106,7 @@ class Game:
         if layout.opponent:
             self.set_opponent(opponent)
         self.targets = [0.0] * (2 * n)
+        self.own_offsets: Sequence[float] | None = None
         self.positions: list[float] = [0.0] * (2 * n)
         self.velocities: list[float] = [0.0] * (2 * n)
         self.ball = (0.0, 0.0, 0.0, 0.0)
@@ -212,6 +216,9 @@ class Game:
         targets = self.targets
         for i, s, a in zip(self._own, self._own_scale, action):
             targets[i] = a * s
+        if self.own_offsets is not None:
+            for i, offset in zip(self._own, self.own_offsets):
+                targets[i] -= offset
         if opponent_action is not None and self._opponent is None:
             raise ValueError(f"{type(self.task).__name__} has no opponent to command")
         if self._opponent is not None:

@@ -18,7 +18,13 @@ RANDOMISATION_BOUNDS = {
     "ball_mass_range": (1e-4, 1.0),
     "drive_gain_range": (1e-3, 10.0),
     "rolling_resistance_range": (0.0, 0.5),
+    # Factors on each drive's own limits. A top speed above the rated one is not offered: the
+    # simulated joints are built for the rated speeds (Bullet caps a spin at 1.1 times its).
+    "drive_speed_range": (0.1, 1.0),
+    "drive_accel_range": (0.1, 2.0),
 }
+#: The randomised quantities drawn once for each drive (the others once for the whole table).
+PER_DRIVE = ("drive_speed", "drive_accel")
 
 
 def check_physics(

@@ -22,6 +22,7 @@ from foosball_gym.envs import options as env_options
 from foosball_gym.envs.estimated import CameraNoise, EstimatedState
 from foosball_gym.envs.options import RENDER_MODES
 from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
+from foosball_gym.envs.rod_errors import RodErrors
 from foosball_gym.game import Game, Outcome, Policy, portable, unpacked
 from foosball_gym.physics_options import check_randomisation
 from foosball_gym.policy_io.observations import check_flag, observation_options
@@ -96,6 +97,22 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     - `rolling_resistance_range`: how a rolling ball slows, in units of g, within [0, 0.5];
       it overrides `rolling_resistance`.
 
+    What a real table varies, for the joints the action drives, each off by default and drawn
+    the same way; each drive or rod has a draw of its own, in `info["dynamics"]` under its
+    name (`drive_speed_home_keeper_slide`, `slide_offset_home_keeper`, ...):
+
+    - `drive_speed_range`: a factor on each drive's top speed (a rod's slide and spin apart),
+      within [0.1, 1]: slower drives than the rated ones.
+    - `drive_accel_range`: a factor on each drive's most acceleration (its force or torque),
+      within [0.1, 2].
+    - `slide_offset_range`: each rod's slide calibration offset in m, within [-0.05, 0.05]. As
+      on a table whose encoder was zeroed off, the observation reads the slide that much
+      further along and a slide target lands that much short; the rewards see the true state.
+    - `angle_offset_range`: each turning rod's angle calibration offset in rad, within
+      [-0.5, 0.5], read and commanded as the slide's.
+    - `rod_angle_noise`: the standard deviation of Gaussian noise on each turning rod's
+      observed angle in rad, drawn afresh at every observation, within [0, 0.5]; 0 is off.
+
     Robust training:
 
     - `estimated_state`: observe the ball and the opponent's rods as the real table does,
@@ -103,7 +120,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
       (`foosball_gym.envs.estimated`).
     - `camera_noise`: the simulated camera's errors, a dict of the fields of
       `foosball_gym.camera.CameraNoise` (`fps`, `position_std`, `rod_std`, `drop_rate`,
-      `hide_under_figurines`, `latency_s`); needs `estimated_state=True`.
+      `hide_under_figurines`, `latency_s`, `latency_jitter_s`); needs `estimated_state=True`.
     - `residual`: above 0, the action corrects the task's scripted baseline, at most 2. The
       rods are sent `clip(scripted(obs) + residual * action, -1, 1)`, `obs` being the
       observation the action answers: an untrained policy (actions near 0) plays like the
@@ -181,6 +198,11 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         ball_mass_range: tuple[float, float] | None,
         drive_gain_range: tuple[float, float] | None,
         rolling_resistance_range: tuple[float, float] | None,
+        drive_speed_range: tuple[float, float] | None,
+        drive_accel_range: tuple[float, float] | None,
+        slide_offset_range: tuple[float, float] | None,
+        angle_offset_range: tuple[float, float] | None,
+        rod_angle_noise: float,
         estimated_state: bool,
         camera_noise: dict[str, Any] | None,
         residual: float | tuple[float, ...],
@@ -228,7 +250,16 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
                 "ball_mass_range": ball_mass_range,
                 "drive_gain_range": drive_gain_range,
                 "rolling_resistance_range": rolling_resistance_range,
+                "drive_speed_range": drive_speed_range,
+                "drive_accel_range": drive_accel_range,
             }
+        )
+        self._rod_errors = RodErrors(
+            self.interface.action_joints,
+            layout.rods,
+            slide_offset_range,
+            angle_offset_range,
+            rod_angle_noise,
         )
         self._estimated: EstimatedState | None = None
         if check_flag("estimated_state", estimated_state):
@@ -356,6 +387,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         if ball_velocity is not None:
             ball_velocity = check_ball_velocity("ball_velocity", ball_velocity)
         self._dynamics = self._randomise_dynamics()
+        if self._rod_errors.ranges:
+            self._dynamics.update(self._rod_errors.draw(self.np_random))
+            self.game.own_offsets = list(self._rod_errors.offsets)
         if self._estimated is not None:
             self._estimated.rng = self.np_random
         self._start(self.task.sample_start(self.np_random, ball_position, ball_velocity, options))
@@ -372,7 +406,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         """Draw this episode's physical parameters where randomisation is on."""
         if not self.randomisation:
             return {}
-        return self.sim.draw_dynamics(self.randomisation, self.np_random, self._base_gains)
+        return self.sim.draw_dynamics(
+            self.randomisation, self.np_random, self._base_gains, self.interface.action_joints
+        )
 
     def _start(self, start) -> None:
         game = self.game
@@ -383,9 +419,12 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def _observe(self) -> np.ndarray:
         game = self.game
+        positions = game.positions
+        if self._rod_errors.on:
+            positions = self._rod_errors.observed(positions, self.np_random)
         if self._estimated is not None:
-            return self._estimated.observation(game.positions, game.velocities)
-        return self.obs_builder.build(game.positions, game.velocities, game.ball)
+            return self._estimated.observation(positions, game.velocities)
+        return self.obs_builder.build(positions, game.velocities, game.ball)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._closed:

@@ -83,7 +83,8 @@ class BlockEnv(FoosballEnv):
 
     The other arguments are those every environment takes, described under
     [FoosballEnv][foosball_gym.envs.base.FoosballEnv]. Block has no opponent:
-    `opponent_prismatic_only` takes only `False`.
+    `opponent_prismatic_only` takes only `False`; its keeper does not turn: `angle_offset_range`
+    takes only `None`, `rod_angle_noise` only 0.
 
     ## Version History
     - v0: first version.
@@ -95,6 +96,9 @@ class BlockEnv(FoosballEnv):
       as `None`, is no longer one.
     - v0: `bank_aim`, `double_bank_share`, `beside_mouth` and `rebound_share`; their defaults
       serve what v0 always served, seed for seed.
+    - v0: what a real table varies, off by default (episodes as before, seed for seed):
+      `drive_speed_range`, `drive_accel_range`, `slide_offset_range`, `angle_offset_range`,
+      `rod_angle_noise`, and `camera_noise`'s `latency_jitter_s`.
     """
 
     def __init__(
@@ -124,6 +128,11 @@ class BlockEnv(FoosballEnv):
         ball_mass_range: tuple[float, float] | None = None,
         drive_gain_range: tuple[float, float] | None = None,
         rolling_resistance_range: tuple[float, float] | None = None,
+        drive_speed_range: tuple[float, float] | None = None,
+        drive_accel_range: tuple[float, float] | None = None,
+        slide_offset_range: tuple[float, float] | None = None,
+        angle_offset_range: tuple[float, float] | None = None,
+        rod_angle_noise: float = 0.0,
         estimated_state: bool = False,
         camera_noise: dict[str, Any] | None = None,
         residual: float | tuple[float, ...] = 0.0,
@@ -163,6 +172,11 @@ class BlockEnv(FoosballEnv):
             ball_mass_range=ball_mass_range,
             drive_gain_range=drive_gain_range,
             rolling_resistance_range=rolling_resistance_range,
+            drive_speed_range=drive_speed_range,
+            drive_accel_range=drive_accel_range,
+            slide_offset_range=slide_offset_range,
+            angle_offset_range=angle_offset_range,
+            rod_angle_noise=rod_angle_noise,
             estimated_state=estimated_state,
             camera_noise=camera_noise,
             residual=residual,

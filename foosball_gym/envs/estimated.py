@@ -2,10 +2,10 @@
 
 With ``estimated_state=True`` an environment does not hand the policy the simulator's true ball
 and opponent rods. It passes them through a simulated camera (frame rate, detection noise,
-dropped detections, the ball hidden under a figurine's head, latency) and then through the very
-:class:`~foosball_gym.estimation.TableStateEstimator` that ``foosball play`` runs on the real
-table. The paper found that training on such estimates narrows the gap between simulation and
-the real table.
+dropped detections, the ball hidden under a figurine's head, latency and its jitter) and then
+through the very :class:`~foosball_gym.estimation.TableStateEstimator` that ``foosball play``
+runs on the real table. The paper found that training on such estimates narrows the gap
+between simulation and the real table.
 """
 
 from __future__ import annotations
@@ -52,7 +52,8 @@ class EstimatedState:
         self.tracked = list(builder.tracked_rods)
         self._slot = {name: builder.rods_in_play.index(name) for name in self.tracked}
         self.estimator = self._new_estimator()
-        self._pending: deque[tuple[float, tuple[float, float] | None, dict]] = deque()
+        # Frames taken and not yet seen: when each is due, then the filter's update.
+        self._pending: deque[tuple[float, float, tuple[float, float] | None, dict]] = deque()
         self._t = 0.0
         self._next_frame = 0.0
         self._ball_before: Sequence[float] = (0.0, 0.0, 0.0, 0.0)
@@ -79,11 +80,16 @@ class EstimatedState:
         while self._next_frame <= self._t + 1e-12:
             a = (self._next_frame - start) / dt
             x, y = bx0 + a * (ball[0] - bx0), by0 + a * (ball[1] - by0)
-            self._pending.append((self._next_frame, *self._measure(x, y, pos, figurines)))
+            measured = self._measure(x, y, pos, figurines)
+            due = self._next_frame + self.noise.latency_s
+            if self.noise.latency_jitter_s:
+                due += float(self.rng.uniform(0.0, self.noise.latency_jitter_s))
+            self._pending.append((due, self._next_frame, *measured))
             self._next_frame += 1.0 / self.noise.fps
         self._ball_before = ball
-        while self._pending and self._pending[0][0] + self.noise.latency_s <= self._t + 1e-12:
-            self.estimator.update(*self._pending.popleft())
+        # In the order taken: a frame due early waits for the one before it.
+        while self._pending and self._pending[0][0] <= self._t + 1e-12:
+            self.estimator.update(*self._pending.popleft()[1:])
 
     def _measure(
         self, x: float, y: float, pos: Sequence[float], figurines: np.ndarray

@@ -89,6 +89,9 @@ class KeeperVsKeeperEnv(FoosballEnv):
     - v0: `first_to`, `match_seconds` and `dead_ball_steps` (on by default: a ball at rest
       out of both keepers' reach is served again after half a second instead of a second);
       the scripted keeper is the top of a ladder of levels (`scripted:N`).
+    - v0: what a real table varies, off by default (episodes as before, seed for seed):
+      `drive_speed_range`, `drive_accel_range`, `slide_offset_range`, `angle_offset_range`,
+      `rod_angle_noise`, and `camera_noise`'s `latency_jitter_s`.
     """
 
     def __init__(
@@ -119,6 +122,11 @@ class KeeperVsKeeperEnv(FoosballEnv):
         ball_mass_range: tuple[float, float] | None = None,
         drive_gain_range: tuple[float, float] | None = None,
         rolling_resistance_range: tuple[float, float] | None = None,
+        drive_speed_range: tuple[float, float] | None = None,
+        drive_accel_range: tuple[float, float] | None = None,
+        slide_offset_range: tuple[float, float] | None = None,
+        angle_offset_range: tuple[float, float] | None = None,
+        rod_angle_noise: float = 0.0,
         estimated_state: bool = False,
         camera_noise: dict[str, Any] | None = None,
         residual: float | tuple[float, ...] = 0.0,
@@ -154,6 +162,11 @@ class KeeperVsKeeperEnv(FoosballEnv):
             ball_mass_range=ball_mass_range,
             drive_gain_range=drive_gain_range,
             rolling_resistance_range=rolling_resistance_range,
+            drive_speed_range=drive_speed_range,
+            drive_accel_range=drive_accel_range,
+            slide_offset_range=slide_offset_range,
+            angle_offset_range=angle_offset_range,
+            rod_angle_noise=rod_angle_noise,
             estimated_state=estimated_state,
             camera_noise=camera_noise,
             residual=residual,

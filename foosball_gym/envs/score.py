@@ -76,6 +76,9 @@ class ScoreEnv(FoosballEnv):
     - v0: `serve_x_range`, `serve_y_range` and `bank_share`, as Block's.
     - v0: the options are the class's keyword arguments; `opponent`, which Score took only
       as `None`, is no longer one.
+    - v0: what a real table varies, off by default (episodes as before, seed for seed):
+      `drive_speed_range`, `drive_accel_range`, `slide_offset_range`, `angle_offset_range`,
+      `rod_angle_noise`, and `camera_noise`'s `latency_jitter_s`.
     """
 
     def __init__(
@@ -104,6 +107,11 @@ class ScoreEnv(FoosballEnv):
         ball_mass_range: tuple[float, float] | None = None,
         drive_gain_range: tuple[float, float] | None = None,
         rolling_resistance_range: tuple[float, float] | None = None,
+        drive_speed_range: tuple[float, float] | None = None,
+        drive_accel_range: tuple[float, float] | None = None,
+        slide_offset_range: tuple[float, float] | None = None,
+        angle_offset_range: tuple[float, float] | None = None,
+        rod_angle_noise: float = 0.0,
         estimated_state: bool = False,
         camera_noise: dict[str, Any] | None = None,
         residual: float | tuple[float, ...] = 0.0,
@@ -141,6 +149,11 @@ class ScoreEnv(FoosballEnv):
             ball_mass_range=ball_mass_range,
             drive_gain_range=drive_gain_range,
             rolling_resistance_range=rolling_resistance_range,
+            drive_speed_range=drive_speed_range,
+            drive_accel_range=drive_accel_range,
+            slide_offset_range=slide_offset_range,
+            angle_offset_range=angle_offset_range,
+            rod_angle_noise=rod_angle_noise,
             estimated_state=estimated_state,
             camera_noise=camera_noise,
             residual=residual,

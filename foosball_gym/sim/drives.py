@@ -82,14 +82,7 @@ class RodDrives:
         self.upper = [float(v) for v in upper]
         self.gains = [float(g) for g in gains]
         self.erp_rate = float(erp_rate)
-        # Per joint: gravity's pull (per sin of the angle), the end stops, the top speed and
-        # the drive's most acceleration.
-        self._joint = [
-            (pull, lo, hi, top, force / m)
-            for pull, lo, hi, top, force, m in zip(
-                self._pull, self.lower, self.upper, self.max_speed, self.max_force, self.mass
-            )
-        ]
+        self._tabulate()
         self.pos = [0.0] * self.n
         self.vel = [0.0] * self.n
         self.mode = "position"
@@ -99,8 +92,32 @@ class RodDrives:
         # Raised by every change a motor in Bullet must be told of (targets, mode, gains).
         self.version = 0
 
+    def _tabulate(self) -> None:
+        # Per joint: gravity's pull (per sin of the angle), the end stops, the top speed and
+        # the drive's most acceleration.
+        self._joint = [
+            (pull, lo, hi, top, force / m)
+            for pull, lo, hi, top, force, m in zip(
+                self._pull, self.lower, self.upper, self.max_speed, self.max_force, self.mass
+            )
+        ]
+
     def set_gains(self, gains: Sequence[float]) -> None:
         self.gains = [float(g) for g in gains]
+        self.version += 1
+
+    def set_limits(self, max_speed: Sequence[float], max_force: Sequence[float]) -> None:
+        """New top speeds and forces (or torques) per joint, for the next command and step."""
+        if len(max_speed) != self.n or len(max_force) != self.n:
+            raise ValueError(f"max_speed and max_force need one value per joint ({self.n})")
+        self.max_speed = [float(s) for s in max_speed]
+        self.max_force = [float(f) for f in max_force]
+        self._tabulate()
+        # The standing commands, held to the new limits as a command is.
+        self.velocity_targets = [
+            max(-m, min(m, t)) for t, m in zip(self.velocity_targets, self.max_speed)
+        ]
+        self.torques = [max(-m, min(m, t)) for t, m in zip(self.torques, self.max_force)]
         self.version += 1
 
     def command(self, mode: str, targets: Sequence[float]) -> None:

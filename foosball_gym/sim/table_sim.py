@@ -44,6 +44,7 @@ from foosball_gym.camera import CameraModel
 from foosball_gym.physics_options import check_physics
 from foosball_gym.sim.contacts import Reach
 from foosball_gym.sim.drives import CONTROL_MODES, RodDrives, drive_acceleration
+from foosball_gym.sim.dynamics import draw_dynamics
 from foosball_gym.sim.view import View, check_image_size
 from foosball_gym.sim.worlds import ERP_RATE, UPRIGHT, TableWorlds, World, drive_masses
 
@@ -163,6 +164,7 @@ class TableSim:
         accel = [drive_acceleration(r, "slide") for r in self.rods] + [
             drive_acceleration(r, "spin") for r in self.rods
         ]
+        self._accel = accel
         self._reach = Reach(self.rods, self._drives, accel, physics_hz, contact_travel)
         self.set_drive_gains(slide_gain, spin_gain)
 
@@ -207,25 +209,26 @@ class TableSim:
         ranges: dict[str, tuple[float, float]],
         rng: np.random.Generator,
         base_gains: tuple[float, float],
+        joints: Sequence[tuple[str, str]] | None = None,
     ) -> dict[str, float]:
-        """Draw and set the physical parameters the domain randomisation ``ranges`` give (the
-        options named ``*_range``, checked), one uniform draw each in their order; returns the
-        values drawn under their quantities' names. ``drive_gain`` is a factor on
-        ``base_gains`` (slide, spin)."""
-        drawn = {
-            name.removesuffix("_range"): float(rng.uniform(*bounds))
-            for name, bounds in ranges.items()
-        }
-        self.set_ball_dynamics(
-            friction=drawn.get("ball_friction"),
-            restitution=drawn.get("ball_restitution"),
-            mass=drawn.get("ball_mass"),
-            rolling_resistance=drawn.get("rolling_resistance"),
+        """Draw and set the physical parameters the domain randomisation ``ranges`` give; see
+        :func:`foosball_gym.sim.dynamics.draw_dynamics`."""
+        return draw_dynamics(self, ranges, rng, base_gains, joints)
+
+    def set_drive_limits(self, speed: Sequence[float], accel: Sequence[float]) -> None:
+        """Scale each drive's top speed and most acceleration (its force or torque) by these
+        factors, one per joint in play (slides, then spins); 1 is the table's own drive."""
+        sizes = {len(speed), len(accel)}
+        if sizes != {2 * self._n} or not all(0 < float(f) < math.inf for f in (*speed, *accel)):
+            raise ValueError(f"drive limits take {2 * self._n} speed and accel factors, each > 0")
+        nominal = drive_limits(self.rods)
+        self._drives.set_limits(
+            [s * f for s, f in zip(nominal["max_speed"], speed)],
+            [m * f for m, f in zip(nominal["max_force"], accel)],
         )
-        if "drive_gain" in drawn:
-            slide, spin = base_gains
-            self.set_drive_gains(slide * drawn["drive_gain"], spin * drawn["drive_gain"])
-        return drawn
+        # The near-contact test's bound, set for the rated drives, grows with a stronger one;
+        # a weaker one keeps it, and the fine steps near a contact stay as fine.
+        self._reach.accel = [a * max(1.0, f) for a, f in zip(self._accel, accel)]
 
     def set_ball_dynamics(
         self,

@@ -191,6 +191,7 @@ class World:
             for name in self.names
         }
         p.changeDynamics(self.body, -1, maxJointVelocity=table.SPIN_MAX_SPEED * 1.1)
+        self.clamps: dict[int, float | None] = {}
         for slide, spin in self.links.values():
             for link, force, speed in (
                 (slide, table.SLIDE_MAX_FORCE, table.SLIDE_MAX_SPEED),
@@ -199,8 +200,8 @@ class World:
                 p.changeDynamics(
                     self.body, link, linearDamping=0.0, angularDamping=0.0, jointDamping=0.0
                 )
-                # The speed clamp set here stays with Bullet's motor; later position commands
-                # keep it (a velocity command drops it: see ``unclamped``).
+                # The speed clamp set here (``clamps``) stays with Bullet's motor; position
+                # commands keep it, a velocity command drops it (None)
                 p.setJointMotorControl2(
                     self.body,
                     link,
@@ -209,6 +210,7 @@ class World:
                     force=force,
                     maxVelocity=speed,
                 )
+                self.clamps[link] = speed
         with _quiet_stdout():
             self.ball = p.loadURDF(
                 str(urdf_path("ball.urdf")),
@@ -218,8 +220,6 @@ class World:
         self.placed: set[str] = set(self.names)
         for name in self.names:
             self.park(name)
-        # Links whose speed clamp a velocity command took away.
-        self.unclamped: set[int] = set()
         # What the placed rods' motors were last told (see TableSim._send), and by whom.
         self.sent: tuple | None = None
         self.mode = "position"
@@ -337,7 +337,7 @@ class World:
         self.motors(
             self.body, links, pybullet.VELOCITY_CONTROL, targetVelocities=speeds, forces=forces
         )
-        self.unclamped.update(links)
+        self.clamps.update(dict.fromkeys(links))
 
     def let_go(self, links: Sequence[int]) -> None:
         """Motors without force, so that raw torques can move the joints (a position motor
@@ -352,13 +352,14 @@ class World:
         self.motors(self.body, links, pybullet.TORQUE_CONTROL, forces=torques)
 
     def _clamp(self, links: Sequence[int], speeds: Sequence[float]) -> None:
-        """Give these links' motors their top speed back where a velocity command took it."""
+        """Give these links' motors their top speed, where a velocity command took it or the
+        drive's top speed changed."""
         for link, speed in zip(links, speeds):
-            if link in self.unclamped:
+            if self.clamps[link] != speed:
                 self.client.setJointMotorControl2(
                     self.body, link, pybullet.POSITION_CONTROL, force=0.0, maxVelocity=speed
                 )
-                self.unclamped.discard(link)
+                self.clamps[link] = speed
 
     def set_step(self, dt: float, substeps: int = 1) -> None:
         """Make a step of the world ``dt`` seconds long, taken in ``substeps`` equal physics

@@ -20,18 +20,11 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table
-from foosball_gym.physics_options import PHYSICS_DEFAULTS, check_physics
+from foosball_gym.physics_options import PHYSICS_DEFAULTS, RANDOMISATION_BOUNDS, check_physics
 
 #: The environment options that make a simulated table's physics what it is: two simulated
 #: tables with different values are different tables.
-PHYSICS_OPTIONS = (
-    *PHYSICS_DEFAULTS,
-    "ball_friction_range",
-    "ball_restitution_range",
-    "ball_mass_range",
-    "drive_gain_range",
-    "rolling_resistance_range",
-)
+PHYSICS_OPTIONS = (*PHYSICS_DEFAULTS, *RANDOMISATION_BOUNDS)
 # What every loop record holds that a fit reads.
 _RECORD_KEYS = ("t", "frame_time", "ball_measured", "own_state", "targets")
 

@@ -139,7 +139,8 @@ class SimulatedTable:
     The environment's physics options apply as they do in the environment: ``rolling_resistance``
     and the simulator's rates, and the domain randomisation ranges (``ball_friction_range``,
     ``ball_restitution_range``, ``ball_mass_range``, ``drive_gain_range``,
-    ``rolling_resistance_range``), drawn afresh at every serve; a range of one value, such as
+    ``rolling_resistance_range``, and ``drive_speed_range`` and ``drive_accel_range`` for the
+    drives the policy moves), drawn afresh at every serve; a range of one value, such as
     ``(0.4, 0.4)``, makes a table with that value.
     """
 
@@ -361,7 +362,10 @@ class SimulatedTable:
         if not self._randomisation:
             return
         self.dynamics = self.sim.draw_dynamics(
-            self._randomisation, self._dynamics_rng, self._base_gains
+            self._randomisation,
+            self._dynamics_rng,
+            self._base_gains,
+            self.game.interface.action_joints,
         )
 
     def serve(self) -> None:
