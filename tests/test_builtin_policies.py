@@ -36,7 +36,9 @@ MARGINS = {"score-obstacles": 0.06}
 
 # What each shipped policy must keep on EPISODES seeded episodes (500 measured:
 # docs/results/index.md).
-FLOORS = {"block": 0.98, "score-resting": 0.95, "score-obstacles": 0.6, "score-incoming": 0.9}
+# builtin:block plays its own options there: any shot, through the camera and filter (91.8 %
+# of 500); its true-state floors are below.
+FLOORS = {"block": 0.88, "score-resting": 0.95, "score-obstacles": 0.6, "score-incoming": 0.9}
 # The opponent a two-player policy is measured against, where it is not the kicking keeper.
 OPPONENTS = {"keeper-vs-keeper": "scripted"}
 
@@ -118,13 +120,26 @@ def test_load_policy_is_offered_by_the_package_itself():
     env.close()
 
 
-def test_block_keeps_the_direct_shots_it_was_not_trained_only_on():
-    # builtin:block was trained on the wide distribution (banks, 2-10 m/s); the default serve,
-    # direct shots at 2-7 m/s, must stay blocked too, on the default observation.
+@pytest.mark.parametrize(
+    "shots, estimated, floor",
+    [
+        ("paper", False, 0.98),  # 100.0 % of 500
+        ("paper", True, 0.98),  # through the camera and filter: 99.6 %
+        ("any", False, 0.97),  # 99.4 %
+    ],
+)
+def test_block_holds_on_the_true_state_and_the_papers_shots(shots, estimated, floor):
+    # builtin:block was trained on any shot a player plays, through the camera and filter; it
+    # must hold on the simulator's own state and on the paper's direct shots too, with the whole
+    # policy: its correction and the keeper under it.
     loaded = load_policy("builtin:block")
-    assert loaded.env_kwargs.get("bank_share") == 0.5
-    trained = evaluate(loaded.policy, "Foosball-Block-v0", {}, EPISODES, seed=7000)
-    assert trained.success_rate >= 0.98, trained
+    assert loaded.env_kwargs.get("rebound_share") == 0.1
+    assert loaded.env_kwargs.get("estimated_state") is True
+    assert loaded.trained_residual == 0.5
+    options = dict(loaded.env_kwargs) if shots == "any" else {}
+    options["estimated_state"] = estimated
+    trained = evaluate(loaded, "Foosball-Block-v0", options, EPISODES, seed=7000)
+    assert trained.success_rate >= floor, trained
 
 
 def test_a_residual_policy_gives_the_whole_action_wherever_it_plays():

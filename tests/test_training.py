@@ -11,7 +11,6 @@ import sys
 import time
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -295,38 +294,6 @@ def interrupt_once_stepping(proc: subprocess.Popen, run: Path, tb_runs: int) -> 
     assert proc.poll() is None, proc.communicate()
     os.killpg(proc.pid, signal.SIGINT)
     return proc.communicate(timeout=120)
-
-
-def test_pretraining_on_estimated_state_labels_with_a_teacher_that_sees_the_true_state():
-    from foosball_gym.training.sb3.pretrain import collect
-
-    kwargs = {"estimated_state": True}
-    demos = collect("Foosball-Block-v0", kwargs, episodes=3, gamma=0.99)
-    # Replay the same seeded episodes: the clone's inputs are the estimates, its labels the
-    # teacher's actions on the true state, which an estimate-fed keeper does not give.
-    env = gym.make("Foosball-Block-v0", **kwargs)
-    base = env.unwrapped
-    teacher, fooled = base.privileged_policy(), base.scripted_policy()
-    rng = np.random.default_rng(0)
-    row, differ = 0, 0
-    try:
-        for i in range(3):
-            obs, _ = env.reset(seed=i)
-            done = False
-            while not done:
-                label = teacher(base.true_observation())
-                np.testing.assert_array_equal(demos.observations[row], obs)
-                np.testing.assert_allclose(demos.actions[row], label, rtol=1e-6)
-                differ += not np.allclose(fooled(obs), label, atol=1e-3)
-                noise = rng.normal(0.0, 0.1, label.shape)
-                executed = np.clip(label + noise, -1, 1).astype(np.float32)
-                obs, _, terminated, truncated, _ = env.step(executed)
-                done = terminated or truncated
-                row += 1
-    finally:
-        env.close()
-    assert row == len(demos.actions)
-    assert differ > row // 4
 
 
 def test_ctrl_c_writes_a_checkpoint_and_resume_continues_from_it(tmp_path):

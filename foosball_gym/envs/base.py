@@ -312,22 +312,6 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         """The scripted baseline for the learner's side of this task."""
         return self.task.scripted_policy(list(self.obs_builder.names), self._estimated is None)
 
-    @property
-    def estimated_state(self) -> bool:
-        """Whether the policy observes the camera and filter's estimate, not the true state."""
-        return self._estimated is not None
-
-    def true_observation(self) -> np.ndarray:
-        """The observation the simulator's own state makes now, with ``estimated_state`` too:
-        what a privileged teacher sees while the learner sees the estimate."""
-        game = self.game
-        return self.obs_builder.build(game.positions, game.velocities, game.ball)
-
-    def privileged_policy(self) -> Policy:
-        """The scripted baseline for the learner's side acting on :meth:`true_observation`:
-        its skills that need the ball's path to a millimetre included."""
-        return self.task.scripted_policy(list(self.obs_builder.names), True)
-
     def success(self, goals_for: int, goals_against: int) -> bool:
         """Whether the task is met with this score so far."""
         return self.task.success(goals_for, goals_against)

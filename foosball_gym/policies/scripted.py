@@ -292,7 +292,8 @@ def guarded_target(rod: table.Rod, x: float, y: float, vx: float, vy: float) -> 
     that followed it to the end of its slide stands in its way, and the ball, struck by the
     back of the figurine, goes in (the wide shots' one way past the scripted keeper). So the
     keeper goes no farther than GUARD_EDGE towards such a ball, and keeps out of the way of a
-    ball behind it.
+    ball behind it. Where the ball is not coming at it, it stands between the ball and the
+    middle of the goal.
     """
     if x < rod.x:
         if vx < 0.0:
@@ -309,7 +310,10 @@ def guarded_target(rod: table.Rod, x: float, y: float, vx: float, vy: float) -> 
             if abs(goal) > table.GOAL_HALF_WIDTH and abs(cross) > GUARD_EDGE:
                 return math.copysign(GUARD_EDGE, cross)
             return cross
-    return y
+    # Not coming at it: on the line from the ball to the middle of the goal, where a shot at
+    # either post is nearest. A camera gives a new shot's speed only some frames late, and
+    # from there no post is far.
+    return y * (rod.x + table.GOAL_LINE_X) / (x + table.GOAL_LINE_X)
 
 
 def slide_for(rod: table.Rod, y: float) -> float:

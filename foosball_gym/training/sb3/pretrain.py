@@ -5,10 +5,6 @@ already plays like the scripted team (and a value function fitted to the returns
 lets PPO spend its samples improving on it instead. The demonstrations are collected with a
 little noise on the executed actions, labelled with the clean scripted action, so the clone
 also learns to recover from small mistakes (as in DART).
-
-On ``estimated_state`` the labels come from a privileged teacher: the scripted baseline acting
-on the true state, while the clone sees the camera and filter's estimate. The clone learns
-what to do from what the real table lets it see, not the mistakes the baseline makes from it.
 """
 
 from __future__ import annotations
@@ -49,9 +45,7 @@ def collect(
 ) -> Demonstrations:
     """Play ``episodes`` episodes with the task's scripted policy and record them."""
     env = gym.make(env_id, **env_kwargs)
-    base = cast("FoosballEnv", env.unwrapped)
-    privileged = base.estimated_state
-    policy = base.privileged_policy() if privileged else base.scripted_policy()
+    policy = cast("FoosballEnv", env.unwrapped).scripted_policy()
     rng = np.random.default_rng(seed)
     obs_all, act_all = [], []
     ret_all: list[float] = []
@@ -61,8 +55,7 @@ def collect(
             obs, info = env.reset(seed=seed + i)
             rewards, done = [], False
             while not done:
-                seen = base.true_observation() if privileged else obs
-                action = np.asarray(policy(seen), dtype=np.float32)
+                action = np.asarray(policy(obs), dtype=np.float32)
                 obs_all.append(obs)
                 act_all.append(action)
                 executed = np.clip(action + rng.normal(0.0, noise, action.shape), -1, 1)
