@@ -148,7 +148,8 @@ class Shots:
             beside = math.nan
         if isinstance(beside_mouth, bool) or not 0.0 <= beside <= BESIDE_MOUTH_LIMIT:
             raise ValueError(
-                f"beside_mouth must be a number in [0, {BESIDE_MOUTH_LIMIT}] m, got {beside_mouth!r}"
+                f"beside_mouth must be a number in [0, {BESIDE_MOUTH_LIMIT}] m, "
+                f"got {beside_mouth!r}"
             )
         return cls(
             check_range("speed_range", speed_range, *SHOT_SPEED_LIMITS),
