@@ -29,10 +29,10 @@ def test_the_teacher_counts_less_and_less_until_its_last_step():
         TeacherCallback(ENV, {}, steps=0)
 
 
-def teacher_gap(run, episodes=5, teacher=None):
+def teacher_gap(run, episodes=5, teacher=None, env_id=ENV):
     """Mean squared gap between the trained policy's actions and the teacher's (by default the
     scripted keeper's), on the states the policy itself visits (where DAgger teaches)."""
-    env = gym.make(ENV)
+    env = gym.make(env_id)
     teacher = teacher or env.unwrapped.scripted_policy()
     policy = load_policy(run).policy
     gaps = []
@@ -48,8 +48,8 @@ def teacher_gap(run, episodes=5, teacher=None):
     return float(np.mean(gaps))
 
 
-def train(run, *extra, steps=6144):
-    argv = ["train", ENV, "--timesteps", str(steps), "--eval-freq", str(steps)]
+def train(run, *extra, steps=6144, env_id=ENV):
+    argv = ["train", env_id, "--timesteps", str(steps), "--eval-freq", str(steps)]
     argv += ["--eval-episodes", "2"]
     argv += ["--learning-rate", "1e-6", "--seed", "3", "--out", str(run), *SMALL, *QUIET, *extra]
     assert main(argv) == 0
@@ -64,10 +64,16 @@ def untaught(tmp_path_factory):
     return run
 
 
-def test_a_learner_taught_on_its_own_states_moves_to_the_scripted_actions(tmp_path, untaught):
-    train(tmp_path / "taught", "--teacher-steps", "100000")
-    plain, taught = teacher_gap(untaught), teacher_gap(tmp_path / "taught")
-    assert taught < 0.5 * plain
+def test_a_learner_taught_on_its_own_states_moves_to_the_scripted_actions(tmp_path):
+    # In Score, whose scripted keeper winds up and kicks: in Block the keeper waits near the
+    # middle for a ball not coming at it, where an untaught learner's actions already are
+    # (a gap of 0.07, which 6,144 taught steps did not halve).
+    score = "Foosball-Score-v0"
+    train(tmp_path / "plain", env_id=score)
+    train(tmp_path / "taught", "--teacher-steps", "100000", env_id=score)
+    plain = teacher_gap(tmp_path / "plain", env_id=score)
+    taught = teacher_gap(tmp_path / "taught", env_id=score)
+    assert taught < 0.5 * plain  # measured: 0.048 against 0.195
     assert TrainConfig.load(tmp_path / "taught" / "config.json").teacher_steps == 100000
 
 

@@ -64,6 +64,8 @@ class ScoreEnv(FoosballEnv):
     - `serve_y_range`: where across the table an incoming ball starts, `(low, high)` in m;
       within [-0.32275, 0.32275].
     - `bank_share`: the share of the incoming shots aimed off a side wall, in [0, 1].
+    - `bank_aim`, `double_bank_share`, `beside_mouth`, `rebound_share`: the incoming shots of
+      any kind a player plays, as Block's (`Foosball-Block-v0`).
 
     The other arguments are those every environment takes, described under
     [FoosballEnv][foosball_gym.envs.base.FoosballEnv]. Score has no opponent:
@@ -74,6 +76,7 @@ class ScoreEnv(FoosballEnv):
     - v0, physics revision 2: the faithful table (the documentation's "The simulated table");
       `control_hz` replaces `substeps`.
     - v0: `serve_x_range`, `serve_y_range` and `bank_share`, as Block's.
+    - v0: `bank_aim`, `double_bank_share`, `beside_mouth` and `rebound_share`, as Block's.
     - v0: the options are the class's keyword arguments; `opponent`, which Score took only
       as `None`, is no longer one.
     - v0: what a real table varies, off by default (episodes as before, seed for seed):
@@ -90,6 +93,10 @@ class ScoreEnv(FoosballEnv):
         serve_x_range: tuple[float, float] = (0.0, 0.4),
         serve_y_range: tuple[float, float] = (-0.3, 0.3),
         bank_share: float = 0.0,
+        double_bank_share: float = 0.0,
+        bank_aim: Literal["model", "mirror"] = "model",
+        beside_mouth: float = 0.0,
+        rebound_share: float = 0.0,
         goal_reward: float = 1000.0,
         out_of_table_penalty: float = 1000.0,
         ball_to_goal_weight: float = 0.0,
@@ -131,6 +138,10 @@ class ScoreEnv(FoosballEnv):
                 serve_x_range=serve_x_range,
                 serve_y_range=serve_y_range,
                 bank_share=bank_share,
+                double_bank_share=double_bank_share,
+                bank_aim=bank_aim,
+                beside_mouth=beside_mouth,
+                rebound_share=rebound_share,
             ),
             opponent=None,
             goal_reward=goal_reward,

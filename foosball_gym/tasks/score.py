@@ -33,10 +33,23 @@ class ScoreTask(Task):
         serve_x_range: tuple[float, float] = (0.0, 0.4),
         serve_y_range: tuple[float, float] = (-0.3, 0.3),
         bank_share: float = 0.0,
+        double_bank_share: float = 0.0,
+        bank_aim: str = "model",
+        beside_mouth: float = 0.0,
+        rebound_share: float = 0.0,
     ) -> None:
         self.ball_start = check_choice("ball_start", ball_start, BALL_STARTS)
         self.obstacles = check_flag("obstacles", obstacles)
-        self.shots = Shots.checked(speed_range, serve_x_range, serve_y_range, bank_share)
+        self.shots = Shots.checked(
+            speed_range,
+            serve_x_range,
+            serve_y_range,
+            bank_share,
+            double_bank_share,
+            bank_aim,
+            beside_mouth,
+            rebound_share,
+        )
         self.extras = OBSTACLES if self.obstacles else ()
         self.layout = Layout(controlled=("home_keeper",), joints="both", static=self.extras)
 

@@ -251,7 +251,10 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     if residual and env_id is not None:
         from foosball_gym.registration import scripted_policy
 
-        baseline = scripted_policy(env_id, env_kwargs)
+        try:
+            baseline = scripted_policy(env_id, env_kwargs)
+        except ValueError as err:  # an environment or options no longer registered
+            raise ModelLoadError(f"the model {text} is a residual: {err}") from None
     return LoadedPolicy(
         policy=snapshot,
         env_id=env_id,
