@@ -39,10 +39,12 @@ def shot_at_goal(
     position: tuple[float, float],
     speed_range: tuple[float, float],
     defender: str,
+    half: float = table.GOAL_MOUTH_HALF,
 ) -> tuple[float, float]:
-    """Velocity of a shot from ``position`` at a uniform point of ``defender``'s goal mouth."""
+    """Velocity of a shot from ``position`` at a uniform point of ``defender``'s goal mouth,
+    taken ``half`` (m) either side of its middle."""
     goal_x = -table.GOAL_LINE_X if defender == table.HOME else table.GOAL_LINE_X
-    target_y = float(rng.uniform(-table.GOAL_MOUTH_HALF, table.GOAL_MOUTH_HALF))
+    target_y = float(rng.uniform(-half, half))
     speed = float(rng.uniform(*speed_range))
     dx, dy = goal_x - position[0], target_y - position[1]
     norm = math.hypot(dx, dy)
@@ -217,14 +219,8 @@ class Shots:
     def _straight(
         self, rng: np.random.Generator, position: tuple[float, float], defender: str
     ) -> tuple[float, float]:
-        if self.beside_mouth == 0.0:
-            return shot_at_goal(rng, position, self.speed_range, defender)
-        goal_x = -table.GOAL_LINE_X if defender == table.HOME else table.GOAL_LINE_X
-        target_y = self._target(rng)
-        speed = float(rng.uniform(*self.speed_range))
-        dx, dy = goal_x - position[0], target_y - position[1]
-        norm = math.hypot(dx, dy)
-        return speed * dx / norm, speed * dy / norm
+        half = table.GOAL_MOUTH_HALF + self.beside_mouth
+        return shot_at_goal(rng, position, self.speed_range, defender, half)
 
     def _modelled_bank(
         self, rng: np.random.Generator, x: float, y: float, side: float
