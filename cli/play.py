@@ -88,7 +88,8 @@ def add_parser(subparsers: Any) -> None:
         "--seed",
         type=seed,
         default=LibraryDefault(PLAY_SIM, "seed"),
-        help="seed of the simulated table's serves",
+        help="seed of the simulated table's serves: serve K is the ball of episode K of "
+        "foosball eval --seed SEED",
     )
     p.add_argument(
         "--camera",

@@ -259,6 +259,12 @@ class Game:
         """Whether the task is met by the goals since the last serve."""
         return self.task.success(self.goals_for, self.goals_against)
 
+    def own_readings(self) -> list[float]:
+        """Where the joints the learner's action drives are, as the table reads them (each off
+        by its calibration offset, if any), in action order."""
+        offsets = self.own_offsets or [0.0] * len(self._own)
+        return [self.positions[i] + o for i, o in zip(self._own, offsets)]
+
     def read_state(self) -> None:
         """Re-read the rods and the ball from the simulator."""
         self.positions, self.velocities = self.sim.joint_states()

@@ -92,6 +92,8 @@ class KeeperVsKeeperEnv(FoosballEnv):
     - v0: what a real table varies, off by default (episodes as before, seed for seed):
       `drive_speed_range`, `drive_accel_range`, `slide_offset_range`, `angle_offset_range`,
       `rod_angle_noise`, and `camera_noise`'s `latency_jitter_s`.
+    - v0: `safety_layer`, on by default with `estimated_state`: an environment on estimated
+      state plays like `foosball play`, its targets shaped by the real table's safety layer.
     """
 
     def __init__(
@@ -129,6 +131,7 @@ class KeeperVsKeeperEnv(FoosballEnv):
         rod_angle_noise: float = 0.0,
         estimated_state: bool = False,
         camera_noise: dict[str, Any] | None = None,
+        safety_layer: bool | str | None = None,
         residual: float | tuple[float, ...] = 0.0,
         render_mode: str | None = None,
         render_width: int = 320,
@@ -169,6 +172,7 @@ class KeeperVsKeeperEnv(FoosballEnv):
             rod_angle_noise=rod_angle_noise,
             estimated_state=estimated_state,
             camera_noise=camera_noise,
+            safety_layer=safety_layer,
             residual=residual,
             render_mode=render_mode,
             render_width=render_width,

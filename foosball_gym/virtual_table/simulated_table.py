@@ -40,12 +40,12 @@ import numpy as np
 
 from foosball_gym import table
 from foosball_gym.camera import CameraModel, CameraNoise
+from foosball_gym.envs.safety_layer import simulated_joint
 from foosball_gym.game import Game
 from foosball_gym.hardware.config import (
     MAX_HEARTBEAT_TIMEOUT_S,
     MAX_WATCHDOG_S,
     BusConfig,
-    JointConfig,
     TableConfig,
 )
 from foosball_gym.physics_options import (
@@ -56,7 +56,7 @@ from foosball_gym.physics_options import (
 )
 from foosball_gym.policy_io.task import TaskInterface
 from foosball_gym.registration import interface_of, make_task
-from foosball_gym.sim import TableSim, drive_acceleration
+from foosball_gym.sim import TableSim
 from foosball_gym.sysid.excitation import CALIBRATION_SERVE_S, calibration_serve, check_serves
 from foosball_gym.virtual_table.camera_process import KEPT_FRAMES, CameraProcess, FrameBuffer
 from foosball_gym.virtual_table.drives import SimulatedDrives
@@ -83,19 +83,7 @@ def virtual_table_config(interface: TaskInterface, mode: str = "csp") -> TableCo
             ("slide", SLIDE_INCREMENTS_PER_M, 1),
             ("spin", SPIN_INCREMENTS_PER_RAD, -1),
         ):
-            joints.append(
-                JointConfig(
-                    rod=rod,
-                    joint=kind,
-                    node_id=node,
-                    increments_per_unit=scale,
-                    direction=direction,
-                    # What the simulated drive reaches: the safety layer's default is a guess
-                    # kept well inside a real drive's, which would make this table's keeper
-                    # slower than the environment's.
-                    max_acceleration=drive_acceleration(table.rod(rod), kind),
-                )
-            )
+            joints.append(simulated_joint(rod, kind, node, scale, direction))
             node += 1
     channel = f"foosball-sim-{os.getpid()}-{next(_channels)}"
     # The simulated drives beat their heartbeats from threads of this very process, which
@@ -164,8 +152,6 @@ class SimulatedTable:
         self._randomisation = check_randomisation(
             {name: options.get(name) for name in RANDOMISATION_BOUNDS}
         )
-        # Drawn from a generator of their own, so that the serves are the same with or without.
-        self._dynamics_rng = np.random.default_rng([seed, 1])
         stagnation = options.get("stagnation_steps", 0)
         # As the environment checks it.
         if not isinstance(stagnation, (int, np.integer)) or stagnation < 0:
@@ -196,7 +182,8 @@ class SimulatedTable:
             self.game = Game(
                 task, interface_of(task, options), self.sim, stagnation_steps=int(stagnation)
             )
-            self.rng = np.random.default_rng(seed)
+            self._seed = seed
+            self.rng = self._serve_rng(0)
             self._draw_dynamics()
             self.game.start(task.sample_start(self.rng))
             self.camera_model = CameraModel(*camera_size)
@@ -363,15 +350,23 @@ class SimulatedTable:
             return
         self.dynamics = self.sim.draw_dynamics(
             self._randomisation,
-            self._dynamics_rng,
+            self.rng,
             self._base_gains,
             self.game.interface.action_joints,
         )
+
+    def _serve_rng(self, serve: int) -> np.random.Generator:
+        """The generator of the serve that follows ``serve`` served balls: seeded with
+        ``seed + serve``, as an environment's episode is by ``reset(seed=seed + serve)``, so
+        that the table serves the balls ``foosball eval --seed SEED`` serves, one for one (the
+        rods stay where the last serve left them)."""
+        return np.random.default_rng(self._seed + serve)
 
     def serve(self) -> None:
         """A new ball, as the task starts its episodes (or a calibration ball); the rods stay
         where they are."""
         with self._lock:
+            self.rng = self._serve_rng(self._serves)
             self._draw_dynamics()
             if self.serves == "calibration":
                 ball = calibration_serve(self.rng, self.game.task.layout.rods)
