@@ -1,0 +1,180 @@
+"""The environment plays like the play stack: the safety layer's target shaping between the
+action and the drives (``safety_layer``), and the simulated table serving the balls of the
+environment's seeded episodes."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from foosball_gym import table
+from foosball_gym.hardware.config import load_config, save_config, shipped_table
+from foosball_gym.hardware.safety import JointLimits, TargetLimiter
+from foosball_gym.registration import task_interface
+
+STILL_BALL = {"ball_position": (0.3, 0.3), "ball_velocity": (0.0, 0.0)}
+KEEPER_LIMIT = table.rod("home_keeper").slide_limit
+
+
+def sent_targets(env, actions) -> list[list[float]]:
+    """The simulated drives' targets of the learner's joints after each action."""
+    game = env.unwrapped.game
+    out = []
+    for action in actions:
+        env.step(np.asarray(action, np.float32))
+        out.append([game.targets[i] for i in game._own])
+    return out
+
+
+def random_actions(n_actions: int, steps: int, seed: int = 0) -> np.ndarray:
+    # Jumps from end to end, holds and small moves: what the limiter must shape.
+    rng = np.random.default_rng(seed)
+    actions = rng.uniform(-1, 1, size=(steps, n_actions))
+    actions[rng.random(steps) < 0.3] = 1.0
+    return actions
+
+
+def test_on_by_default_with_estimated_state_and_off_on_the_true_state(make_env):
+    assert make_env("Foosball-Block-v0").unwrapped._safety is None
+    assert make_env("Foosball-Block-v0", estimated_state=True).unwrapped._safety is not None
+    off = make_env("Foosball-Block-v0", estimated_state=True, safety_layer=False)
+    assert off.unwrapped._safety is None
+    assert make_env("Foosball-Block-v0", safety_layer=True).unwrapped._safety is not None
+
+
+@pytest.mark.parametrize("env_id", ["Foosball-Block-v0", "Foosball-Score-v0"])
+def test_the_drives_get_what_the_play_stacks_limiter_sends(make_env, env_id):
+    """The very targets ``TableDrives.command`` sends a simulated table, step by step."""
+    from foosball_gym.virtual_table.simulated_table import virtual_table_config
+
+    env = make_env(env_id, safety_layer=True)
+    env.reset(seed=0, options=STILL_BALL)
+    interface = env.unwrapped.interface
+    config = virtual_table_config(interface)
+    start = env.unwrapped.game.own_readings()
+    limiters = [
+        TargetLimiter(JointLimits.of(config.joint(j)), config.control_period, p)
+        for j, p in zip(interface.action_joints, start)
+    ]
+    actions = random_actions(interface.n_actions, 40).astype(np.float32)
+    got = sent_targets(env, actions)
+    for action, targets in zip(actions, got):
+        wanted = [
+            lim.step(s * float(a)) for lim, s, a in zip(limiters, interface.action_scales, action)
+        ]
+        assert targets == pytest.approx(wanted, abs=1e-12)
+
+
+def test_targets_stay_inside_the_margin_and_move_no_faster_than_the_drive(make_env):
+    env = make_env("Foosball-Block-v0", safety_layer=True)
+    env.reset(seed=0, options=STILL_BALL)
+    targets = [t[0] for t in sent_targets(env, [[1.0]] * 30 + [[-1.0]] * 30)]
+    assert max(targets) == pytest.approx(KEEPER_LIMIT - 0.005)
+    assert min(targets) == pytest.approx(-(KEEPER_LIMIT - 0.005))
+    steps = np.abs(np.diff([0.0, *targets]))
+    assert steps.max() <= table.SLIDE_MAX_SPEED / table.CONTROL_HZ + 1e-12
+    # Without it the first step's target is the action's own.
+    plain = make_env("Foosball-Block-v0")
+    plain.reset(seed=0, options=STILL_BALL)
+    assert sent_targets(plain, [[1.0]])[0][0] == pytest.approx(KEEPER_LIMIT)
+
+
+def test_the_rod_gets_there_later_through_the_safety_layer(make_env):
+    """What the play stack costs a keeper: the rod follows a target that moves."""
+    after_three = {}
+    for on in (False, True):
+        env = make_env("Foosball-Block-v0", safety_layer=on)
+        env.reset(seed=0, options=STILL_BALL)
+        sent_targets(env, [[0.8]] * 3)
+        after_three[on] = env.unwrapped.game.positions[0]
+    # Measured: 82.1 mm against 74.9 mm, on the way to 98.4 mm.
+    assert after_three[False] - after_three[True] > 0.004
+
+
+def test_a_table_configuration_sets_the_limits(make_env, tmp_path):
+    """A real table's file: its keeper's 50 m/s^2, against the simulated drive's 96.5."""
+    path = shipped_table("keeper")
+    config = load_config(path)
+    env = make_env("Foosball-Block-v0", safety_layer=str(path))
+    env.reset(seed=0, options=STILL_BALL)
+    joint = config.joint(("home_keeper", "slide"))
+    first = sent_targets(env, [[1.0]])[0][0]
+    assert first == pytest.approx(joint.max_acceleration * (1 / table.CONTROL_HZ) ** 2)
+
+    slow = dataclasses.replace(config)
+    slow.joints = [dataclasses.replace(j, max_speed=1.0) for j in config.joints]
+    save_config(slow, tmp_path / "slow.yaml")
+    env = make_env("Foosball-Block-v0", safety_layer=str(tmp_path / "slow.yaml"))
+    env.reset(seed=0, options=STILL_BALL)
+    targets = [t[0] for t in sent_targets(env, [[1.0]] * 20)]
+    assert np.diff(targets).max() == pytest.approx(1.0 / table.CONTROL_HZ)
+
+
+def test_calibration_offsets_are_shaped_as_the_table_reads_its_rods(make_env):
+    """The limiter works on the table's readings: with the slide read 2 cm along, a target of
+    the full stroke lands 2 cm short of the margin."""
+    env = make_env("Foosball-Block-v0", safety_layer=True, slide_offset_range=(0.02, 0.02))
+    env.reset(seed=0, options=STILL_BALL)
+    targets = [t[0] for t in sent_targets(env, [[1.0]] * 30)]
+    assert targets[-1] == pytest.approx(KEEPER_LIMIT - 0.005 - 0.02)
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("no-such-table.yaml", "cannot use the table configuration"),
+        (3, "must be None (on with estimated_state), True, False, or the path"),
+    ],
+)
+def test_bad_values_are_refused_naming_what_is_allowed(value, message):
+    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        gym.make("Foosball-Block-v0", safety_layer=value)
+
+
+def test_a_table_without_the_tasks_drives_is_refused(tmp_path):
+    # The keeper table drives the home keeper only: Score's keeper turns too, and it has
+    # that; the full game's other rods it has not.
+    with pytest.raises(ValueError, match="no drive for home_defense slide"):
+        gym.make("Foosball-FullGame-v0", safety_layer=str(shipped_table("keeper")))
+
+
+def test_rewards_see_the_policys_own_action(make_env):
+    """Action regularisation penalises what the policy did, not what the limiter made of it."""
+    kwargs = {"action_regularisation_weight": 1.0}
+    results = []
+    for on in (False, True):
+        env = make_env("Foosball-Block-v0", safety_layer=on, **kwargs)
+        env.reset(seed=0, options=STILL_BALL)
+        results.append(env.step(np.array([1.0], np.float32))[4]["reward_action_regularisation"])
+    assert results[0] == results[1] != 0
+
+
+# ------------------------------------------------------------------ the simulated table's serves
+
+
+@pytest.mark.parametrize(
+    ("env_id", "kwargs"),
+    [
+        ("Foosball-Block-v0", {"bank_share": 0.3, "rebound_share": 0.1}),
+        ("Foosball-Score-v0", {"ball_start": "incoming", "ball_friction_range": (0.05, 0.2)}),
+    ],
+)
+def test_the_simulated_table_serves_the_balls_of_the_seeded_episodes(make_env, env_id, kwargs):
+    """``foosball play --seed S`` serves episode S + K's ball as its serve K, with the same
+    drawn physics: play and eval meet the same shots."""
+    from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
+
+    config = virtual_table_config(task_interface(env_id, kwargs))
+    sim_table = SimulatedTable(env_id, kwargs, config, seed=7, camera_size=(64, 36))
+    env = make_env(env_id, **kwargs)
+    try:
+        for k in range(4):
+            sim_table.serve()
+            _, info = env.reset(seed=7 + k)
+            assert sim_table.game.ball == pytest.approx(env.unwrapped.game.ball, abs=0)
+            assert sim_table.dynamics == info.get("dynamics", {})
+    finally:
+        sim_table.close()
