@@ -4,14 +4,12 @@ environment's seeded episodes."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import gymnasium as gym
 import numpy as np
 import pytest
 
 from foosball_gym import table
-from foosball_gym.hardware.config import load_config, save_config, shipped_table
+from foosball_gym.hardware.config import simulated_joint
 from foosball_gym.hardware.safety import JointLimits, TargetLimiter
 from foosball_gym.registration import task_interface
 
@@ -94,23 +92,13 @@ def test_the_rod_gets_there_later_through_the_safety_layer(make_env):
     assert after_three[False] - after_three[True] > 0.004
 
 
-def test_a_table_configuration_sets_the_limits(make_env, tmp_path):
-    """A real table's file: its keeper's 50 m/s^2, against the simulated drive's 96.5."""
-    path = shipped_table("keeper")
-    config = load_config(path)
-    env = make_env("Foosball-Block-v0", safety_layer=str(path))
-    env.reset(seed=0, options=STILL_BALL)
-    joint = config.joint(("home_keeper", "slide"))
-    first = sent_targets(env, [[1.0]])[0][0]
-    assert first == pytest.approx(joint.max_acceleration * (1 / table.CONTROL_HZ) ** 2)
-
-    slow = dataclasses.replace(config)
-    slow.joints = [dataclasses.replace(j, max_speed=1.0) for j in config.joints]
-    save_config(slow, tmp_path / "slow.yaml")
-    env = make_env("Foosball-Block-v0", safety_layer=str(tmp_path / "slow.yaml"))
-    env.reset(seed=0, options=STILL_BALL)
-    targets = [t[0] for t in sent_targets(env, [[1.0]] * 20)]
-    assert np.diff(targets).max() == pytest.approx(1.0 / table.CONTROL_HZ)
+def test_the_simulated_tables_limits_are_its_configurations():
+    """The environment's limits are those ``foosball play --table sim`` configures its
+    drives with, for every joint of every rod."""
+    for rod in table.ROD_BY_NAME:
+        for kind in ("slide", "spin"):
+            joint = simulated_joint(rod, kind)
+            assert JointLimits.simulated(rod, kind) == JointLimits.of(joint)
 
 
 def test_calibration_offsets_are_shaped_as_the_table_reads_its_rods(make_env):
@@ -122,23 +110,10 @@ def test_calibration_offsets_are_shaped_as_the_table_reads_its_rods(make_env):
     assert targets[-1] == pytest.approx(KEEPER_LIMIT - 0.005 - 0.02)
 
 
-@pytest.mark.parametrize(
-    ("value", "message"),
-    [
-        ("no-such-table.yaml", "cannot use the table configuration"),
-        (3, "must be None (on with estimated_state), True, False, or the path"),
-    ],
-)
-def test_bad_values_are_refused_naming_what_is_allowed(value, message):
-    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)")):
+@pytest.mark.parametrize("value", ["yes", 1, "table.yaml"])
+def test_bad_values_are_refused_naming_what_is_allowed(value):
+    with pytest.raises(ValueError, match=r"safety_layer must be None \(on with estimated_state\)"):
         gym.make("Foosball-Block-v0", safety_layer=value)
-
-
-def test_a_table_without_the_tasks_drives_is_refused(tmp_path):
-    # The keeper table drives the home keeper only: Score's keeper turns too, and it has
-    # that; the full game's other rods it has not.
-    with pytest.raises(ValueError, match="no drive for home_defense slide"):
-        gym.make("Foosball-FullGame-v0", safety_layer=str(shipped_table("keeper")))
 
 
 def test_rewards_see_the_policys_own_action(make_env):

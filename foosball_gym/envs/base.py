@@ -25,7 +25,6 @@ from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
 from foosball_gym.envs.rod_errors import RodErrors
 from foosball_gym.envs.safety_layer import SafetyLayer, check_safety_layer
 from foosball_gym.game import Game, Outcome, Policy, portable, unpacked
-from foosball_gym.hardware.config import TableConfig
 from foosball_gym.physics_options import check_randomisation
 from foosball_gym.policy_io.observations import check_flag, observation_options
 from foosball_gym.policy_io.task import TaskInterface, check_action, residual_action
@@ -126,9 +125,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     - `safety_layer`: send the action's targets through the real table's safety layer, as
       `foosball play` does: each kept inside its joint's limit less a margin (5 mm, 0.1 rad)
       and moved towards no faster than the drive's top speed and acceleration allow
-      (`foosball_gym.envs.safety_layer`). `None` turns it on with `estimated_state`; `True`
-      uses the simulated table's limits, the path of a table configuration (YAML) that
-      table's. Rewards see the policy's own action.
+      (`foosball_gym.envs.safety_layer`), with the limits of the simulated table of
+      `foosball play --table sim`. `None` turns it on with `estimated_state`. Rewards see the
+      policy's own action.
     - `residual`: above 0, the action corrects the task's scripted baseline, at most 2. The
       rods are sent `clip(scripted(obs) + residual * action, -1, 1)`, `obs` being the
       observation the action answers: an untrained policy (actions near 0) plays like the
@@ -213,7 +212,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         rod_angle_noise: float,
         estimated_state: bool,
         camera_noise: dict[str, Any] | None,
-        safety_layer: bool | str | None,
+        safety_layer: bool | None,
         residual: float | tuple[float, ...],
         render_mode: str | None,
         render_width: int,
@@ -300,14 +299,10 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             gui=render_mode == "human",
         )
         self.dt = self.sim.control_dt
-        shaped = check_safety_layer(safety_layer, self._estimated is not None)
         self._safety: SafetyLayer | None = None
-        if shaped:
+        if check_safety_layer(safety_layer, self._estimated is not None):
             self._safety = SafetyLayer(
-                self.interface.action_joints,
-                self.interface.action_scales,
-                self.dt,
-                shaped if isinstance(shaped, TableConfig) else None,
+                self.interface.action_joints, self.interface.action_scales, self.dt
             )
         self.metadata = {**self.metadata, "render_fps": self.sim.control_hz}
         self._base_gains = (self.sim.slide_gain, self.sim.spin_gain)

@@ -137,7 +137,7 @@ class BlockEnv(FoosballEnv):
         rod_angle_noise: float = 0.0,
         estimated_state: bool = False,
         camera_noise: dict[str, Any] | None = None,
-        safety_layer: bool | str | None = None,
+        safety_layer: bool | None = None,
         residual: float | tuple[float, ...] = 0.0,
         render_mode: str | None = None,
         render_width: int = 320,

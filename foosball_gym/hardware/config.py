@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from foosball_gym import table
+from foosball_gym.policy_io.target_limits import DEFAULT_LIMIT_MARGIN
 
 Joint = tuple[str, str]  # (rod name, "slide" | "spin"), as in foosball_gym.policy_io.task
 
@@ -42,10 +43,9 @@ BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_00
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 UINT32_MAX = 2**32 - 1
 
-# Defaults for a joint that does not set them: a margin that keeps a rod off its end stops,
-# and accelerations well inside what the drives reach (70 N on about 0.8 kg of rod and carriage;
+# Defaults for a joint that does not set them (its margin: DEFAULT_LIMIT_MARGIN): accelerations
+# well inside what the drives reach (70 N on about 0.8 kg of rod and carriage;
 # 1.41 N m on a rod of a few 1e-5 kg m^2), to be replaced by measured values.
-DEFAULT_LIMIT_MARGIN = {"slide": 0.005, "spin": 0.1}
 DEFAULT_MAX_ACCELERATION = {"slide": 50.0, "spin": 3000.0}
 
 
@@ -242,6 +242,23 @@ class JointConfig:
 
     def speed_from_increments(self, increments: int) -> float:
         return increments / (self.direction * self.increments_per_unit)
+
+
+def simulated_joint(
+    rod: str, kind: str, node_id: int = 1, increments_per_unit: float = 1.0, direction: int = 1
+) -> JointConfig:
+    """The configuration of one joint of the simulated table: the safety layer's default
+    margin and top speed, and the acceleration the simulated drive reaches (the safety
+    layer's default is a guess kept well inside a real drive's, which would make the simulated
+    table's rods slower than the environment's)."""
+    return JointConfig(
+        rod=rod,
+        joint=kind,
+        node_id=node_id,
+        increments_per_unit=increments_per_unit,
+        direction=direction,
+        max_acceleration=table.drive_acceleration(table.rod(rod), kind),
+    )
 
 
 @dataclass

@@ -286,7 +286,7 @@ class TableDrives:
         for key, limiter in self._limiters.items():
             try:
                 sent[key] = limiter.step(targets.get(key))
-            except UnsafeCommand as e:
+            except ValueError as e:
                 self._latch.trip(UnsafeCommand(f"{key[0]} {key[1]}: {e}"))
         try:
             for key, value in sent.items():

@@ -40,13 +40,13 @@ import numpy as np
 
 from foosball_gym import table
 from foosball_gym.camera import CameraModel, CameraNoise
-from foosball_gym.envs.safety_layer import simulated_joint
 from foosball_gym.game import Game
 from foosball_gym.hardware.config import (
     MAX_HEARTBEAT_TIMEOUT_S,
     MAX_WATCHDOG_S,
     BusConfig,
     TableConfig,
+    simulated_joint,
 )
 from foosball_gym.physics_options import (
     PHYSICS_DEFAULTS,
