@@ -561,11 +561,22 @@ class TableSim:
         """The model of the camera :meth:`render` draws through at this size."""
         return self._posed_view().camera(width, height)
 
-    def render(self, width: int = 320, height: int = 180, layered: bool = True) -> np.ndarray:
+    def render(
+        self,
+        width: int = 320,
+        height: int = 180,
+        layered: bool = True,
+        scene: tuple[Sequence[float], Sequence[float]] | None = None,
+    ) -> np.ndarray:
         """An (height, width, 3) uint8 top view from the CPU renderer (see
-        :meth:`View.render`)."""
+        :meth:`View.render`), of the table as it stands or of ``scene`` (as :meth:`scene`
+        gives it)."""
         check_image_size(width, height)  # before a view is built for it
-        return self._posed_view().render(width, height, layered)
+        view = self._posed_view()
+        if scene is not None:
+            positions, ball = scene
+            view.pose(positions, [0.0] * len(positions), ball)
+        return view.render(width, height, layered)
 
     def close(self) -> None:
         if not self._closed:

@@ -69,6 +69,8 @@ SPIN_INCREMENTS_PER_RAD = 3600 / (2 * np.pi)
 # The share of a control period a real-time loop waits for a frame still being rendered (a
 # 320 x 180 frame takes 3 ms for one rod, 5 ms for all eight): the rest is the loop's.
 FRAME_PATIENCE = 0.6
+# Where a frame in which the detector misses the ball puts it: under the playing surface.
+HIDDEN_BALL_Z = -0.1
 _channels = itertools.count()
 logger = logging.getLogger(__name__)
 
@@ -167,8 +169,12 @@ class SimulatedTable:
         self.time = 0.0
         self.steps = 0
         self.late_steps = 0
+        # The camera errs as the task's camera model says a real one does: its picture shows
+        # the ball and the opponent's rods where a detector would place them.
+        self.camera_noise = CameraNoise.from_dict(options.get("camera_noise"))
+        self._camera_rng = np.random.default_rng([seed, 2])
         if camera_latency_s is None:
-            camera_latency_s = CameraNoise.from_dict(options.get("camera_noise")).latency_s
+            camera_latency_s = self.camera_noise.latency_s
         if not camera_latency_s >= 0:
             raise ValueError(f"camera_latency_s must be 0 or more, got {camera_latency_s!r}")
         self.camera_latency = float(camera_latency_s)
@@ -182,6 +188,8 @@ class SimulatedTable:
             self.game = Game(
                 task, interface_of(task, options), self.sim, stagnation_steps=int(stagnation)
             )
+            rods = task.layout.rods
+            self._opponent_slides = [rods.index(rod) for rod in task.layout.opponent]
             self._seed = seed
             self.rng = self._serve_rng(0)
             self._draw_dynamics()
@@ -215,7 +223,7 @@ class SimulatedTable:
         self._served_at = 0.0
         self._t0 = time.monotonic()
         if self._camera is not None:
-            self._camera.request((0, 0.0), *self.sim.scene())
+            self._camera.request((0, 0.0), *self.seen_scene())
 
     # ------------------------------------------------------------------ time
 
@@ -263,7 +271,7 @@ class SimulatedTable:
                     return
                 self._waiting = False
                 self._ticked.notify_all()
-                stamp, scene = (self._serves, self.time), self.sim.scene()
+                stamp, scene = (self._serves, self.time), self.seen_scene()
             if self._camera is not None:
                 self._camera.request(stamp, *scene)
             next_tick += dt
@@ -294,9 +302,29 @@ class SimulatedTable:
 
     # ------------------------------------------------------------------ the loop's side
 
+    def seen_scene(self) -> tuple[list[float], list[float]]:
+        """The table now as its camera pictures it (:meth:`TableSim.scene`'s joint positions
+        and ball), with the errors of :attr:`camera_noise`: the ball off by ``position_std``,
+        or missing (below the table) in a share ``drop_rate`` of the frames, and each
+        opponent rod's slide off by ``rod_std``. A figurine's head covers the ball in the
+        picture itself."""
+        positions, ball = self.sim.scene()
+        noise, rng = self.camera_noise, self._camera_rng
+        if noise.drop_rate and rng.random() < noise.drop_rate:
+            ball = [ball[0], ball[1], HIDDEN_BALL_Z]
+        elif noise.position_std:
+            dx, dy = rng.normal(0.0, noise.position_std, size=2)
+            ball = [ball[0] + float(dx), ball[1] + float(dy), ball[2]]
+        if noise.rod_std:
+            for i in self._opponent_slides:
+                positions[i] += float(rng.normal(0.0, noise.rod_std))
+        return positions, ball
+
     def frame(self) -> np.ndarray:
         """The camera's view of the table now, RGB (lock-step)."""
-        return self.sim.render(self.camera_model.width, self.camera_model.height)
+        return self.sim.render(
+            self.camera_model.width, self.camera_model.height, scene=self.seen_scene()
+        )
 
     def read(self) -> tuple[float, np.ndarray | None]:
         """The newest camera frame whose latency has passed and the table time it shows, RGB;
@@ -382,7 +410,7 @@ class SimulatedTable:
             self._balls.append((self.time, self.game.ball))
             if self._camera is not None:
                 # Queued: the loop waits for a picture of the new ball.
-                self._camera.request((self._serves, self.time), *self.sim.scene(), queue=True)
+                self._camera.request((self._serves, self.time), *self.seen_scene(), queue=True)
 
     def step(self) -> tuple[int, bool]:
         """One control step: the drives take their targets, the opponent moves, physics runs.
