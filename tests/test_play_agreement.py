@@ -1,6 +1,6 @@
-"""The environment plays like the play stack: the safety layer's target shaping between the
-action and the drives (``safety_layer``), and the simulated table serving the balls of the
-environment's seeded episodes."""
+"""Play and eval meet the same game: the environment's safety layer shapes targets as the play
+stack does (``safety_layer``), and the simulated table serves the balls of the environment's
+seeded episodes, seen by a camera that errs as the environment's camera model."""
 
 from __future__ import annotations
 
@@ -153,3 +153,60 @@ def test_the_simulated_table_serves_the_balls_of_the_seeded_episodes(make_env, e
             assert sim_table.dynamics == info.get("dynamics", {})
     finally:
         sim_table.close()
+
+
+# ------------------------------------------------------------------ the simulated table's camera
+
+
+def sim_table(env_id: str = "Foosball-KeeperVsKeeper-v0", **kwargs):
+    from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
+
+    config = virtual_table_config(task_interface(env_id, kwargs))
+    return SimulatedTable(env_id, kwargs, config, seed=3, camera_size=(320, 180))
+
+
+def test_the_simulated_camera_pictures_the_ball_and_rods_with_the_models_errors():
+    t = sim_table()
+    try:
+        t.serve()
+        truth_pos, truth_ball = t.sim.scene()
+        seen = [t.seen_scene() for _ in range(4000)]
+    finally:
+        t.close()
+    balls = np.array([b for _, b in seen])
+    hidden = balls[:, 2] < 0
+    # Defaults: 2 % of frames miss the ball, the others place it within 2 mm (std).
+    assert 0.012 < hidden.mean() < 0.03
+    offsets = balls[~hidden, :2] - np.array(truth_ball[:2])
+    assert offsets.std(axis=0) == pytest.approx([0.002, 0.002], rel=0.08)
+    assert np.abs(offsets.mean(axis=0)).max() < 0.0002
+    # KeeperVsKeeper: rods home_keeper, away_keeper; only the opponent's slide is off (3 mm).
+    positions = np.array([p for p, _ in seen]) - np.array(truth_pos)
+    assert positions[:, 1].std() == pytest.approx(0.003, rel=0.08)
+    assert not positions[:, [0, 2, 3]].any()
+
+
+def test_a_camera_without_errors_pictures_the_table_as_it_is():
+    exact = {"position_std": 0.0, "rod_std": 0.0, "drop_rate": 0.0}
+    t = sim_table(estimated_state=True, camera_noise=exact)
+    try:
+        t.serve()
+        assert t.seen_scene() == t.sim.scene()
+    finally:
+        t.close()
+
+
+def test_a_missed_frame_shows_no_ball_to_the_detector():
+    from foosball_gym.vision import ColourBallDetector
+
+    t = sim_table("Foosball-Block-v0", estimated_state=True, camera_noise={"drop_rate": 0.999})
+    try:
+        t.serve()
+        positions, ball = t.sim.scene()
+        detector = ColourBallDetector()
+        shown = t.sim.render(320, 180, scene=(positions, ball))[:, :, ::-1]
+        assert detector.detect(np.ascontiguousarray(shown)) is not None
+        missed = t.frame()[:, :, ::-1]
+        assert detector.detect(np.ascontiguousarray(missed)) is None
+    finally:
+        t.close()
