@@ -232,6 +232,7 @@ def play_sim(
     camera_latency_s: float | None = None,
     view: str = "top",
     serves: str = "task",
+    camera_errors: bool = True,
 ) -> PlayReport:
     """Play ``episodes`` served balls on the simulated table, through the whole stack.
 
@@ -242,6 +243,8 @@ def play_sim(
     ``camera_latency_s`` is how long the simulated camera's frames take to reach the loop
     (see :class:`~foosball_gym.virtual_table.simulated_table.SimulatedTable`; by default the
     latency of the task's simulated camera, 30 ms unless ``camera_noise`` says).
+    ``camera_errors`` False pictures the ball and the rods exactly where they are, instead of
+    with the errors of the task's camera model.
 
     ``gui`` opens the PyBullet GUI on the table, with the serve and the score written in the
     window. ``human`` names the away rod (``"keeper"``, or in Foosball-FullGame-v0 also
@@ -286,6 +289,7 @@ def play_sim(
         pace=pace,
         view=view,
         serves=serves,
+        camera_errors=camera_errors,
     )
     if rod is not None:
         keys = table.keyboard_events

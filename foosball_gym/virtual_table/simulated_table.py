@@ -28,6 +28,7 @@ ball lying still for the task's ``stagnation_steps``.
 from __future__ import annotations
 
 import collections
+import dataclasses
 import itertools
 import logging
 import math
@@ -111,7 +112,8 @@ class SimulatedTable:
         env_id, env_kwargs: the task the policy was trained on (its physics options apply).
         config: the table configuration the master uses (see :func:`virtual_table_config`); its
             bus must be a ``virtual`` one.
-        seed: seeds the serves (and the opponent's randomness, if any).
+        seed: seeds the serves: serve K is the ball (and the drawn physics) of the task's
+            environment reset with seed ``seed + K``.
         camera_size: (width, height) of the rendered camera frames.
         camera_latency_s: how long after it is taken a frame reaches the loop (s): exposure,
             readout and transfer on a real camera. By default the latency of the task's
@@ -125,6 +127,9 @@ class SimulatedTable:
         serves: ``"task"``, the task's own balls, or ``"calibration"``, balls that show the
             table's physics to ``foosball sysid`` (:mod:`foosball_gym.sysid.excitation`),
             each served for up to :attr:`serve_steps` steps.
+        camera_errors: picture the ball and the opponent's rods with the errors of the task's
+            camera model (``camera_noise``; see :meth:`seen_scene`), as the environment's
+            simulated camera sees them; False pictures them exactly.
 
     The environment's physics options apply as they do in the environment: ``rolling_resistance``
     and the simulator's rates, and the domain randomisation ranges (``ball_friction_range``,
@@ -147,6 +152,7 @@ class SimulatedTable:
         pace: bool = False,
         view: str = "top",
         serves: str = "task",
+        camera_errors: bool = True,
     ) -> None:
         task, options = make_task(env_id, env_kwargs)
         physics = check_physics(*(options.get(k, d) for k, d in PHYSICS_DEFAULTS.items()))
@@ -172,6 +178,10 @@ class SimulatedTable:
         # The camera errs as the task's camera model says a real one does: its picture shows
         # the ball and the opponent's rods where a detector would place them.
         self.camera_noise = CameraNoise.from_dict(options.get("camera_noise"))
+        if not camera_errors:
+            self.camera_noise = dataclasses.replace(
+                self.camera_noise, position_std=0.0, rod_std=0.0, drop_rate=0.0
+            )
         self._camera_rng = np.random.default_rng([seed, 2])
         if camera_latency_s is None:
             camera_latency_s = self.camera_noise.latency_s
