@@ -201,7 +201,13 @@ class SimulatedTable:
             rods = task.layout.rods
             self._opponent_slides = [rods.index(rod) for rod in task.layout.opponent]
             self._seed = seed
-            self.rng = self._serve_rng(0)
+            if self.serves == "calibration":
+                # Calibration balls match no environment's episodes: one stream of balls, and
+                # the physics drawn from a stream apart, so that they serve the same balls.
+                self.rng = np.random.default_rng(seed)
+                self._dynamics_rng = np.random.default_rng([seed, 1])
+            else:
+                self.rng = self._dynamics_rng = self._serve_rng(0)
             self._draw_dynamics()
             self.game.start(task.sample_start(self.rng))
             self.camera_model = CameraModel(*camera_size)
@@ -388,7 +394,7 @@ class SimulatedTable:
             return
         self.dynamics = self.sim.draw_dynamics(
             self._randomisation,
-            self.rng,
+            self._dynamics_rng,
             self._base_gains,
             self.game.interface.action_joints,
         )
@@ -404,7 +410,8 @@ class SimulatedTable:
         """A new ball, as the task starts its episodes (or a calibration ball); the rods stay
         where they are."""
         with self._lock:
-            self.rng = self._serve_rng(self._serves)
+            if self.serves == "task":
+                self.rng = self._dynamics_rng = self._serve_rng(self._serves)
             self._draw_dynamics()
             if self.serves == "calibration":
                 ball = calibration_serve(self.rng, self.game.task.layout.rods)
