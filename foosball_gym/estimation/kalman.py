@@ -2,16 +2,18 @@
 
 Both are constant-velocity filters (filterpy) that take measurements at whatever times frames
 arrive, carry on predicting through missed detections, and say when their estimate has gone
-stale. The ball's filter knows the walls: its prediction bounces off them.
+stale. The ball's filter knows the walls: its prediction bounces off them. It mixes two models
+of the ball (filterpy's interacting multiple models), one rolling and one kicked.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 from filterpy.common import Q_discrete_white_noise
-from filterpy.kalman import KalmanFilter
+from filterpy.kalman import IMMEstimator, KalmanFilter
 
 from foosball_gym import table
 
@@ -43,13 +45,56 @@ def bounce(
     return x, y, vx, vy
 
 
+def _bounced(x: np.ndarray, restitution: float) -> np.ndarray:
+    """A filter's state column (x, y, vx, vy) brought back into the field."""
+    px, py, vx, vy = (float(v) for v in np.ravel(x))
+    return np.array(bounce(px, py, vx, vy, restitution), dtype=np.float64).reshape(4, 1)
+
+
+class _DetectionModel(KalmanFilter):
+    """A filterpy filter whose detections' likelihood is worked out in closed form: SciPy's
+    general one took a third of the ball filter's time, which the environments pay every
+    frame."""
+
+    @property
+    def log_likelihood(self) -> float:
+        if self._log_likelihood is None:  # type: ignore[has-type]
+            (a, b), (c, d) = self.S
+            y0, y1 = self.y.ravel()
+            det = a * d - b * c
+            distance = (d * y0 * y0 - (b + c) * y0 * y1 + a * y1 * y1) / det
+            self._log_likelihood = -0.5 * (distance + math.log(det)) - math.log(2 * math.pi)
+        return self._log_likelihood
+
+
+@functools.lru_cache(maxsize=64)
+def _process_noise(dt: float, acceleration_var: float) -> np.ndarray:
+    """A constant-velocity model's process noise over ``dt`` (frames mostly come at one rate,
+    so a handful of values serve every frame)."""
+    Q = Q_discrete_white_noise(dim=2, dt=dt, var=acceleration_var, block_size=2, order_by_dim=False)
+    Q.setflags(write=False)
+    return Q
+
+
 class BallFilter:
     """The ball's position and velocity from noisy, irregular, sometimes missing detections.
 
+    Two constant-velocity models run side by side and are mixed by how well each explains the
+    detections (filterpy's interacting multiple models): a ball that rolls, lies still or
+    crosses the field keeps its velocity (``rolling_acceleration_std``), and one that meets a
+    figurine or a wall changes it within a frame (``acceleration_std``). The rolling model
+    averages the camera's noise over many frames, where one model fast enough for a kick would
+    follow every frame's error: 2 mm on a ball at rest turns a shot from the goal's edge
+    several degrees.
+
     Args:
         measurement_std: standard deviation of a detected position (m).
-        acceleration_std: the random acceleration the model allows (m/s^2): a ball rolls
-            straight, but figurines and walls change its velocity abruptly.
+        acceleration_std: the random acceleration the kicked model allows (m/s^2): figurines
+            and walls change the ball's velocity abruptly.
+        rolling_acceleration_std: the random acceleration the rolling model allows (m/s^2);
+            0 or None leaves the kicked model alone.
+        switch_probability: the chance per frame that the ball goes from one model to the
+            other.
         stale_after: seconds without a detection after which :attr:`stale` is true and the
             estimate stops moving: a ball unseen this long is held under a figurine or a hand,
             not rolling on as it was last seen.
@@ -62,14 +107,30 @@ class BallFilter:
         self,
         measurement_std: float = 0.002,
         acceleration_std: float = 40.0,
+        rolling_acceleration_std: float | None = 1.0,
+        switch_probability: float = 0.05,
         stale_after: float = 0.2,
         reset_after: float = 0.5,
         wall_restitution: float = table.BALL_RESTITUTION,
     ) -> None:
-        self.kf = KalmanFilter(dim_x=4, dim_z=2)
-        self.kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
-        self.kf.R = np.eye(2) * measurement_std**2
-        self.acceleration_var = acceleration_std**2
+        if not 0.0 < switch_probability < 1.0:
+            raise ValueError(f"switch_probability must be in (0, 1), got {switch_probability}")
+        stds = [acceleration_std] + ([rolling_acceleration_std] if rolling_acceleration_std else [])
+        if any(not std > 0 for std in stds):
+            raise ValueError(f"acceleration stds must be positive, got {stds}")
+        self.models = []
+        for _ in stds:
+            kf = _DetectionModel(dim_x=4, dim_z=2)
+            kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
+            kf.R = np.eye(2) * measurement_std**2
+            self.models.append(kf)
+        self.acceleration_vars = [std**2 for std in stds]
+        n = len(stds)
+        switch = np.full((n, n), switch_probability / max(n - 1, 1))
+        np.fill_diagonal(switch, 1.0 - switch_probability if n > 1 else 1.0)
+        self._switch = switch
+        self.imm: IMMEstimator | None = None
+        self.x = np.zeros((4, 1))
         self.stale_after = stale_after
         self.reset_after = reset_after
         self.restitution = wall_restitution
@@ -89,19 +150,31 @@ class BallFilter:
     @property
     def state(self) -> tuple[float, float, float, float]:
         """x, y, vx, vy now (m, m/s); zeros before the first detection."""
-        x, y, vx, vy = self.kf.x.ravel()
+        x, y, vx, vy = self.x.ravel()
         return float(x), float(y), float(vx), float(vy)
 
+    @property
+    def kicked_probability(self) -> float:
+        """How likely the kicked model is, by the detections so far (1 with one model)."""
+        return 1.0 if self.imm is None else float(self.imm.mu[0])
+
     def _start(self, t: float, xy: tuple[float, float]) -> None:
-        self.kf.x = np.array([[xy[0]], [xy[1]], [0.0], [0.0]])
-        # Position as measured; velocity unknown, up to a hard shot.
-        self.kf.P = np.diag([self.kf.R[0, 0], self.kf.R[1, 1], 10.0**2, 10.0**2])
+        for kf in self.models:
+            kf.x = np.array([[xy[0]], [xy[1]], [0.0], [0.0]])
+            # Position as measured; velocity unknown, up to a hard shot.
+            kf.P = np.diag([kf.R[0, 0], kf.R[1, 1], 10.0**2, 10.0**2])
+        # A new ball may come at any speed: the kicked model leads until the frames say.
+        mu = np.full(len(self.models), 0.5 / max(len(self.models) - 1, 1))
+        mu[0] = 0.5 if len(self.models) > 1 else 1.0
+        self.imm = IMMEstimator(self.models, mu, self._switch) if len(self.models) > 1 else None
+        self.x = self.models[0].x.copy()
         self.t = self.last_seen = t
 
     def forget(self) -> None:
         """Drop the estimate: the next detection starts afresh, at any time (a new ball put
         in play). Until then the state is zeros, as before the first detection."""
-        self.kf.x = np.zeros((4, 1))
+        self.x = np.zeros((4, 1))
+        self.imm = None
         self.t = self.last_seen = None
 
     def update(self, t: float, xy: tuple[float, float] | None) -> None:
@@ -115,24 +188,37 @@ class BallFilter:
         dt = t - self.t
         if dt < 0:
             raise ValueError(f"measurements must come in time order (t went from {self.t} to {t})")
+        was_stale, held = self.stale, self.x.copy()
         if dt > 0:
-            self.kf.F = np.array([[1.0, 0, dt, 0], [0, 1.0, 0, dt], [0, 0, 1.0, 0], [0, 0, 0, 1.0]])
-            self.kf.Q = Q_discrete_white_noise(
-                dim=2, dt=dt, var=self.acceleration_var, block_size=2, order_by_dim=False
-            )
-            self.kf.predict()
+            F = np.array([[1.0, 0, dt, 0], [0, 1.0, 0, dt], [0, 0, 1.0, 0], [0, 0, 0, 1.0]])
+            for kf, var in zip(self.models, self.acceleration_vars):
+                kf.F = F
+                kf.Q = _process_noise(dt, var)
+            (self.imm or self.models[0]).predict()
             self._keep_inside()
             self.t = t
         if xy is not None:
-            self.kf.update(np.asarray(xy, dtype=float).reshape(2, 1))
+            (self.imm or self.models[0]).update(np.asarray(xy, dtype=float).reshape(2, 1))
             self._keep_inside()
             self.last_seen = t
         elif self.stale:
-            self.kf.x[2:] = 0.0
+            # Every model held at the one estimate, so that mixing them moves it no more.
+            if was_stale:
+                self.x = held
+            self.x[2:] = 0.0
+            for kf in self.models:
+                kf.x = self.x.copy()
 
     def _keep_inside(self) -> None:
-        """Bounce the estimate back into the field if the model or a detection took it out."""
-        self.kf.x = np.array(bounce(*self.state, self.restitution), dtype=float).reshape(4, 1)
+        """Bounce the estimate back into the field if the model or a detection took it out:
+        every model's, and the mixed one."""
+        for kf in self.models:
+            kf.x = _bounced(kf.x, self.restitution)
+        # As differences from the first model: models that agree mix to exactly their value.
+        first = self.models[0].x
+        mu = [1.0] if self.imm is None else self.imm.mu
+        mixed = first + sum(m * (kf.x - first) for m, kf in zip(mu, self.models))
+        self.x = _bounced(mixed, self.restitution)
 
     def predict_ahead(self, latency: float) -> tuple[float, float, float, float]:
         """Where the ball will be ``latency`` seconds after the last update, walls included."""
