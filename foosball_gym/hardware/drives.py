@@ -151,6 +151,10 @@ class TableDrives:
         clock: the table's clock (seconds) the command guard measures the silence on: the
             wall clock for a real table or one simulated in real time, the simulated time in
             lock-step. :meth:`use_clock` changes it.
+        answer_timeout_s: how long each drive's answer to a SYNC or a set-point may take
+            (s); None: one control period, as a real table's drives give it. A table
+            simulated in lock-step waits for the loop, so there a drive's answer held up by
+            the machine's load is no fault.
 
     Attributes:
         drives: one :class:`Cia402Drive` per configured joint, by ``(rod, joint)``.
@@ -165,6 +169,7 @@ class TableDrives:
         network: canopen.Network | None = None,
         *,
         clock: Callable[[], float] = time.monotonic,
+        answer_timeout_s: float | None = None,
     ) -> None:
         master_node_id = getattr(config, "master_node_id", DEFAULT_MASTER_NODE_ID)
         if master_node_id in {joint.node_id for joint in config.joints}:
@@ -187,6 +192,7 @@ class TableDrives:
                     control_hz=config.control_hz,
                     heartbeat_timeout_s=config.heartbeat_timeout_s,
                     master_node_id=master_node_id,
+                    answer_timeout_s=answer_timeout_s,
                 )
                 for joint in config.joints
             }

@@ -85,6 +85,8 @@ class Cia402Drive(DriveLink):
             master's may be before the drive quick-stops itself.
         master_node_id: the node id the master's heartbeat comes from; None leaves the drive's
             consumer heartbeat alone.
+        answer_timeout_s: how long to wait for the drive's answer to a SYNC or a set-point
+            (s); None: one control period, as a real drive gives it.
 
     Every method that talks to the drive raises :class:`DriveFault` (node id and reason) when
     the drive does not answer or refuses. The methods may be called from several threads (the
@@ -103,11 +105,15 @@ class Cia402Drive(DriveLink):
         control_hz: float,
         heartbeat_timeout_s: float,
         master_node_id: int | None = None,
+        answer_timeout_s: float | None = None,
     ) -> None:
         if mode not in MODE_CODES:
             raise ValueError(f"unknown drive mode {mode!r}; allowed: {', '.join(MODE_CODES)}")
         self.mode = mode
         self.control_hz = control_hz
+        if answer_timeout_s is not None and not answer_timeout_s > 0:
+            raise ValueError(f"answer_timeout_s must be positive or None, got {answer_timeout_s}")
+        self.answer_timeout_s = 1.0 / control_hz if answer_timeout_s is None else answer_timeout_s
         self.heartbeat_timeout_s = heartbeat_timeout_s
         self.master_node_id = master_node_id
         super().__init__(network, joint)
@@ -282,7 +288,7 @@ class Cia402Drive(DriveLink):
             base = CW_ENABLE_OPERATION | CW_CHANGE_IMMEDIATELY
             self._write(TARGET_POSITION, increments)
             self._write(CONTROLWORD, base | CW_NEW_SET_POINT)
-            deadline = time.monotonic() + 1.0 / self.control_hz
+            deadline = time.monotonic() + self.answer_timeout_s
             # Bit 4 must stay up until the drive has seen it; a fault ends the wait early and
             # is reported by fault_reason().
             while not (statusword := self._read_statusword()) & (
@@ -291,8 +297,8 @@ class Cia402Drive(DriveLink):
                 if time.monotonic() > deadline:
                     raise DriveFault(
                         self.joint,
-                        f"did not acknowledge the set-point within one control period "
-                        f"(statusword 0x{statusword:04X})",
+                        f"did not acknowledge the set-point within "
+                        f"{1e3 * self.answer_timeout_s:.1f} ms (statusword 0x{statusword:04X})",
                     )
             self._write(CONTROLWORD, base)
 
@@ -304,8 +310,8 @@ class Cia402Drive(DriveLink):
     def actual(self) -> tuple[float, float]:
         """Position (m or rad) and velocity (m/s or rad/s).
 
-        In csp after a SYNC: the drive's TPDO answer to it, waited for up to one control
-        period. Otherwise (pp, or no SYNC since the last read): read over SDO.
+        In csp after a SYNC: the drive's TPDO answer to it, waited for up to
+        ``answer_timeout_s``. Otherwise (pp, or no SYNC since the last read): read over SDO.
         """
         joint = self.joint
         with self._changed:
@@ -313,13 +319,12 @@ class Cia402Drive(DriveLink):
             if self._pdo and mark is not None:
                 answered = self._changed.wait_for(
                     lambda: self._received[0] > mark[0] and self._received[1] > mark[1],
-                    timeout=1.0 / self.control_hz,
+                    timeout=self.answer_timeout_s,
                 )
                 if not answered:
                     raise DriveFault(
                         joint,
-                        f"no TPDO answer to the SYNC within one control period "
-                        f"({1e3 / self.control_hz:.1f} ms)",
+                        f"no TPDO answer to the SYNC within {1e3 * self.answer_timeout_s:.1f} ms",
                     )
                 self._sync_mark = None
                 # The drive's TPDOs answered, so both are set.
