@@ -118,11 +118,9 @@ class Game:
     def start(self, start: Start) -> None:
         """Put the rods and the ball where ``start`` says (a figurine that would overlap the
         ball is slid beside it) and the score at 0-0."""
-        slide = [
-            clear_of_ball(rod, s, start.ball_position) for rod, s in zip(self.rods, start.slide)
-        ]
-        self.sim.reset(slide, start.spin, start.ball_position, start.ball_velocity)
-        self.targets[:] = [float(v) for v in (*slide, *start.spin)]
+        pose = self.start_pose(start)
+        self.sim.reset(pose[: len(self.rods)], start.spin, start.ball_position, start.ball_velocity)
+        self.targets[:] = pose
         self._begin()
 
     def serve(self, rng: np.random.Generator) -> None:
@@ -136,6 +134,30 @@ class Game:
                 for rod, s in zip(self.rods, self.positions[:n])
             ):
                 break
+        self.sim.place_ball(start.ball_position, start.ball_velocity)
+        self._begin()
+
+    def start_pose(self, start: Start) -> list[float]:
+        """The joint values (slides, then spins, in the layout's rod order) that ``start``
+        puts the rods at, as :meth:`start` places them."""
+        slide = [
+            clear_of_ball(rod, s, start.ball_position) for rod, s in zip(self.rods, start.slide)
+        ]
+        return [float(v) for v in (*slide, *start.spin)]
+
+    @property
+    def joint_index(self) -> dict[Joint, int]:
+        """Where each joint's value is in :attr:`positions` (slides, then spins)."""
+        return dict(self._index)
+
+    def start_targets(self, start: Start) -> dict[Joint, float]:
+        """:meth:`start_pose` by joint."""
+        pose = self.start_pose(start)
+        return {joint: pose[i] for joint, i in self._index.items()}
+
+    def serve_start(self, start: Start) -> None:
+        """The ball of ``start``, wherever the rods are, and the score at 0-0: a serve
+        after the rods were brought to ``start``'s places (see :meth:`start_pose`)."""
         self.sim.place_ball(start.ball_position, start.ball_velocity)
         self._begin()
 

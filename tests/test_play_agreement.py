@@ -155,6 +155,43 @@ def test_the_simulated_table_serves_the_balls_of_the_seeded_episodes(make_env, e
         sim_table.close()
 
 
+@pytest.mark.parametrize(
+    ("kwargs", "policy"),
+    [({}, "builtin:score-resting"), ({"obstacles": True}, "builtin:score-obstacles")],
+)
+def test_play_brings_the_rods_to_each_episodes_start_before_its_ball(
+    monkeypatch, make_env, kwargs, policy
+):
+    """After a shot the keeper's feet stood where the next ball at rest goes, and the table drew
+    another ball (33 of 60 serves from rest). Play now brings the rods to where the episode
+    starts them, at rest, and serves that episode's ball: the one eval plays."""
+    from foosball_gym import load_policy
+    from foosball_gym.play.stack import play_sim
+    from foosball_gym.virtual_table import simulated_table
+
+    served = []
+    real_serve = simulated_table.SimulatedTable.serve
+
+    def recorded_serve(table_self):
+        real_serve(table_self)
+        served.append((table_self.game.ball, list(table_self.sim.joint_states()[0])))
+
+    monkeypatch.setattr(simulated_table.SimulatedTable, "serve", recorded_serve)
+    env_id = "Foosball-Score-v0"
+    report = play_sim(
+        load_policy(policy), env_id, kwargs, episodes=6, seed=11, camera_size=(320, 180)
+    )
+    assert report.episodes == 6
+    env = make_env(env_id, **kwargs)
+    for k, (ball, joints) in enumerate(served):
+        env.reset(seed=11 + k)
+        assert ball == pytest.approx(env.unwrapped.game.ball, abs=0), f"serve {k}"
+        positions, _ = env.unwrapped.rod_joint_values()
+        n = len(positions) // 2
+        assert joints[:n] == pytest.approx(positions[:n], abs=0.001), f"serve {k}"  # slides
+        assert joints[n:] == pytest.approx(positions[n:], abs=0.02), f"serve {k}"  # spins
+
+
 # ------------------------------------------------------------------ the simulated table's camera
 
 

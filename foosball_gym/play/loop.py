@@ -144,22 +144,32 @@ class PlayLoop:
         self._new_ball = True
         self._first_frame_early_by = max(0.0, float(first_frame_early_by))
 
-    def decide(self) -> LoopRecord:
-        """Everything before the targets go out: camera to action."""
-        times: dict[str, float] = {}
-        start = time.perf_counter()
-        got = self.source.read()
-        if got is None:
-            raise EOFError("the camera has no more frames")
-        frame_time, frame = got
+    def hold(self, targets: Mapping[Joint, float]) -> None:
+        """One control step that sends ``targets`` (m or rad) through the safety layer
+        instead of the policy's: the rods brought to where the next serve starts them. The
+        camera's new pictures feed the watchdog as in :meth:`decide`; nothing is detected,
+        estimated or recorded (the next ball starts its estimate afresh). Follow it with the
+        table's step and :meth:`settle`."""
+        frame_time, _ = self._take_frame()
+        self._last_frame_time = frame_time
+        self.command(targets)
+
+    def command(self, targets: Mapping[Joint, float]) -> None:
+        """Send ``targets`` (m or rad) through the safety layer, not the policy's."""
+        self.drives.command(targets, self.clock())
+
+    def settle(self) -> None:
+        """The drives' state after a :meth:`hold` step, and the watchdog and fault checks."""
+        self._state = self.drives.read()
+        self.drives.check(self.clock())
+
+    def _perceive(
+        self, times: dict[str, float]
+    ) -> tuple[float, Any, tuple[float, float] | None, tuple[float, float] | None, dict]:
+        """A frame through the detector into the filters: the frame's time and picture, the
+        detected pixel and table point, the opponent's rods; ``times`` gets the stages' ends."""
+        frame_time, frame = self._take_frame()
         times["frame"] = time.perf_counter()
-        if frame is not None and (self._last_seen is None or frame_time > self._last_seen):
-            # Only a new picture is news for the state estimate: a camera that delivers none
-            # (frozen, or read() giving the last frame again) trips the watchdog, however
-            # busily the loop goes on predicting.
-            self._last_seen = frame_time
-            self.drives.feed_state(self.clock() + self._first_frame_early_by)
-            self._first_frame_early_by = 0.0
         detection = self.detector.detect(frame) if frame is not None else None
         pixel, ball = None, None
         if detection is not None:
@@ -171,6 +181,29 @@ class PlayLoop:
             slides = dict(self.rod_tracker(frame))
         times["detect"] = time.perf_counter()
         self.estimator.update(frame_time, ball, slides)
+        return frame_time, frame, pixel, ball, slides
+
+    def _take_frame(self) -> tuple[float, Any]:
+        """The camera's next frame (its time, and the picture or None); a new picture feeds
+        the drives' state watchdog."""
+        got = self.source.read()
+        if got is None:
+            raise EOFError("the camera has no more frames")
+        frame_time, frame = got
+        if frame is not None and (self._last_seen is None or frame_time > self._last_seen):
+            # Only a new picture is news for the state estimate: a camera that delivers none
+            # (frozen, or read() giving the last frame again) trips the watchdog, however
+            # busily the loop goes on predicting.
+            self._last_seen = frame_time
+            self.drives.feed_state(self.clock() + self._first_frame_early_by)
+            self._first_frame_early_by = 0.0
+        return frame_time, frame
+
+    def decide(self) -> LoopRecord:
+        """Everything before the targets go out: camera to action."""
+        times: dict[str, float] = {}
+        start = time.perf_counter()
+        frame_time, frame, pixel, ball, slides = self._perceive(times)
         pos, vel = self.own_joints()
         obs = self.estimator.observation(pos, vel)
         times["estimate"] = time.perf_counter()

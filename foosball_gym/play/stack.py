@@ -332,6 +332,9 @@ def play_sim(
                 loop.start()
                 record = None
                 for serve in range(1, episodes + 1):
+                    ready = None
+                    if serve > 1 and table.serves == "task":
+                        ready = _ready_for_serve(table, loop)
                     table.serve()
                     # Without this the filter would take the new ball for the old one jumping,
                     # and spend the first frames of a fast shot unlearning that velocity.
@@ -342,7 +345,10 @@ def play_sim(
                     if record is not None and realtime:
                         # The table's clock runs on while the camera shows the new ball: the rods
                         # keep their last targets, and the watchdog hears the loop is alive.
-                        loop.send(record)
+                        if ready is None:
+                            loop.send(record)
+                        else:
+                            loop.command(ready)
                     for _ in range(max_steps):
                         # A step the table took while the loop was busy: its command was late.
                         late = table.late_steps
@@ -386,6 +392,21 @@ def play_sim(
     return report
 
 
+def _ready_for_serve(table: Any, loop: PlayLoop) -> dict[Any, float]:
+    """Bring the rods to where the next serve's episode starts them, and to rest, before the
+    ball comes: as an environment's reset places them, so that the table serves the ball of
+    that episode (a rod left where the ball goes made the table draw another). Gives up after
+    :data:`READY_STEPS` and serves anyway. Returns the rods' targets there."""
+    targets = table.prepare_serve()
+    for _ in range(READY_STEPS):
+        loop.hold(targets)
+        table.step()
+        loop.settle()
+        if table.rods_ready():
+            break
+    return targets
+
+
 def _score_lines(
     report: PlayReport, table: Any, serve: int, episodes: int, human: str | None, view: str
 ) -> list[str]:
@@ -408,6 +429,9 @@ REALTIME_CAMERA = (320, 180)
 # thread came more than a control period late, and 300-serve lock-step sessions stopped on a
 # "fault" that simulated time never saw. A drive that does not answer at all still stops it.
 LOCKSTEP_ANSWER_TIMEOUT_S = 0.5
+# The most control steps the rods take to get to a serve's start: a keeper crosses its range
+# and turns its feet down in well under a second.
+READY_STEPS = 120
 
 
 class _TableCamera:

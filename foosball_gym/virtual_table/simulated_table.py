@@ -55,10 +55,11 @@ from foosball_gym.physics_options import (
     check_physics,
     check_randomisation,
 )
-from foosball_gym.policy_io.task import TaskInterface
+from foosball_gym.policy_io.task import Joint, TaskInterface
 from foosball_gym.registration import interface_of, make_task
 from foosball_gym.sim import TableSim
 from foosball_gym.sysid.excitation import CALIBRATION_SERVE_S, calibration_serve, check_serves
+from foosball_gym.tasks.base import Start
 from foosball_gym.virtual_table.camera_process import KEPT_FRAMES, CameraProcess, FrameBuffer
 from foosball_gym.virtual_table.drives import SimulatedDrives
 from foosball_gym.virtual_table.viewer_process import ViewerProcess
@@ -72,6 +73,12 @@ SPIN_INCREMENTS_PER_RAD = 3600 / (2 * np.pi)
 FRAME_PATIENCE = 0.6
 # Where a frame in which the detector misses the ball puts it: under the playing surface.
 HIDDEN_BALL_Z = -0.1
+# A rod is ready for a serve within these of the place an episode starts it, and at rest: an
+# encoder's few increments, well under what moves a shot.
+READY_SLIDE_M = 0.001
+READY_SPIN_RAD = 0.02
+READY_SPEED = 0.02
+
 _channels = itertools.count()
 logger = logging.getLogger(__name__)
 
@@ -237,6 +244,11 @@ class SimulatedTable:
         self._balls.append((0.0, self.game.ball))
         self._serves = 0
         self._served_at = 0.0
+        # The next serve's start, drawn by prepare_serve(), and the places it puts the rods
+        # that no drive moves (the opponent's, still obstacles) while the loop brings its own.
+        self._pending: Start | None = None
+        self._ready_targets: dict[Joint, float] = {}
+        self._free_ready: dict[Joint, float] | None = None
         self._t0 = time.monotonic()
         if self._camera is not None:
             self._camera.request((0, 0.0), *self.seen_scene())
@@ -296,7 +308,9 @@ class SimulatedTable:
                 next_tick = time.monotonic() + dt
 
     def _tick(self) -> tuple[int, bool, bool]:
-        if self.game.task.layout.opponent:
+        if self._free_ready is not None:
+            self.drives.set_free_targets(self._free_ready)
+        elif self.game.task.layout.opponent:
             self.drives.set_free_targets(self.game.opponent_targets())
         self.drives.apply()
         outcome = self.game.advance()
@@ -406,10 +420,49 @@ class SimulatedTable:
         rods stay where the last serve left them)."""
         return np.random.default_rng(self._seed + serve)
 
-    def serve(self) -> None:
-        """A new ball, as the task starts its episodes (or a calibration ball); the rods stay
-        where they are."""
+    def prepare_serve(self) -> dict[Joint, float]:
+        """Draw the next task serve (its ball, its physics and where it starts the rods, as
+        ``foosball eval --seed`` starts that episode) and give the places of the rods the
+        drives move, which the loop brings them to before :meth:`serve`. Until then the table
+        moves the other rods to theirs.
+
+        Raises:
+            ValueError: the table serves calibration balls, which start no episode.
+        """
+        if self.serves != "task":
+            raise ValueError("only the task's serves start the rods where an episode does")
         with self._lock:
+            self.rng = self._dynamics_rng = self._serve_rng(self._serves)
+            self._draw_dynamics()
+            self._pending = self.game.task.sample_start(self.rng)
+            self._ready_targets = self.game.start_targets(self._pending)
+            driven = {drive.joint.key for drive in self.drives.drives.values()}
+            self._free_ready = {j: v for j, v in self._ready_targets.items() if j not in driven}
+            return {j: v for j, v in self._ready_targets.items() if j in driven}
+
+    def rods_ready(self) -> bool:
+        """Whether every rod is at rest where :meth:`prepare_serve` wants it: within
+        :data:`READY_SLIDE_M` and :data:`READY_SPIN_RAD`, moving slower than
+        :data:`READY_SPEED` (m/s or rad/s)."""
+        with self._lock:
+            positions, velocities = self.sim.joint_states()
+            index = self.game.joint_index
+            for joint, target in self._ready_targets.items():
+                i = index[joint]
+                tolerance = READY_SLIDE_M if joint[1] == "slide" else READY_SPIN_RAD
+                if abs(positions[i] - target) > tolerance or abs(velocities[i]) > READY_SPEED:
+                    return False
+            return True
+
+    def serve(self) -> None:
+        """A new ball: the one :meth:`prepare_serve` drew, or else one as the task starts its
+        episodes (or a calibration ball), the rods staying where they are."""
+        with self._lock:
+            if self._pending is not None:
+                self.game.serve_start(self._pending)
+                self._pending, self._free_ready, self._ready_targets = None, None, {}
+                self._served()
+                return
             if self.serves == "task":
                 self.rng = self._dynamics_rng = self._serve_rng(self._serves)
             self._draw_dynamics()
@@ -418,6 +471,10 @@ class SimulatedTable:
                 self.game.put_ball(ball.position, ball.velocity, ball.rolling)
             else:
                 self.game.serve(self.rng)
+            self._served()
+
+    def _served(self) -> None:
+        with self._lock:
             # What the clock reported of the old ball since the last step is no news of this one.
             self._events.clear()
             self._stagnated = self._dead = False
