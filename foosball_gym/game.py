@@ -145,11 +145,6 @@ class Game:
         ]
         return [float(v) for v in (*slide, *start.spin)]
 
-    @property
-    def joint_index(self) -> dict[Joint, int]:
-        """Where each joint's value is in :attr:`positions` (slides, then spins)."""
-        return dict(self._index)
-
     def start_targets(self, start: Start) -> dict[Joint, float]:
         """:meth:`start_pose` by joint."""
         pose = self.start_pose(start)

@@ -247,7 +247,7 @@ class SimulatedTable:
         # The next serve's start, drawn by prepare_serve(), and the places it puts the rods
         # that no drive moves (the opponent's, still obstacles) while the loop brings its own.
         self._pending: Start | None = None
-        self._ready_targets: dict[Joint, float] = {}
+        self._ready_pose: list[float] = []
         self._free_ready: dict[Joint, float] | None = None
         self._t0 = time.monotonic()
         if self._camera is not None:
@@ -435,10 +435,11 @@ class SimulatedTable:
             self.rng = self._dynamics_rng = self._serve_rng(self._serves)
             self._draw_dynamics()
             self._pending = self.game.task.sample_start(self.rng)
-            self._ready_targets = self.game.start_targets(self._pending)
+            self._ready_pose = self.game.start_pose(self._pending)
+            targets = self.game.start_targets(self._pending)
             driven = {drive.joint.key for drive in self.drives.drives.values()}
-            self._free_ready = {j: v for j, v in self._ready_targets.items() if j not in driven}
-            return {j: v for j, v in self._ready_targets.items() if j in driven}
+            self._free_ready = {j: v for j, v in targets.items() if j not in driven}
+            return {j: v for j, v in targets.items() if j in driven}
 
     def rods_ready(self) -> bool:
         """Whether every rod is at rest where :meth:`prepare_serve` wants it: within
@@ -446,10 +447,9 @@ class SimulatedTable:
         :data:`READY_SPEED` (m/s or rad/s)."""
         with self._lock:
             positions, velocities = self.sim.joint_states()
-            index = self.game.joint_index
-            for joint, target in self._ready_targets.items():
-                i = index[joint]
-                tolerance = READY_SLIDE_M if joint[1] == "slide" else READY_SPIN_RAD
+            n = len(self.game.rods)  # slides first, then spins
+            for i, target in enumerate(self._ready_pose):
+                tolerance = READY_SLIDE_M if i < n else READY_SPIN_RAD
                 if abs(positions[i] - target) > tolerance or abs(velocities[i]) > READY_SPEED:
                     return False
             return True
@@ -460,7 +460,7 @@ class SimulatedTable:
         with self._lock:
             if self._pending is not None:
                 self.game.serve_start(self._pending)
-                self._pending, self._free_ready, self._ready_targets = None, None, {}
+                self._pending, self._free_ready, self._ready_pose = None, None, []
                 self._served()
                 return
             if self.serves == "task":
