@@ -55,15 +55,6 @@ def train(run, *extra, steps=6144, env_id=ENV):
     assert main(argv) == 0
 
 
-@pytest.fixture(scope="module")
-def untaught(tmp_path_factory):
-    """A run that nothing teaches: PPO's own steps are too small to move it, so what moves the
-    taught runs beside it is their teacher."""
-    run = tmp_path_factory.mktemp("teacher") / "plain"
-    train(run)
-    return run
-
-
 def test_a_learner_taught_on_its_own_states_moves_to_the_scripted_actions(tmp_path):
     # In Score, whose scripted keeper winds up and kicks: in Block the keeper waits near the
     # middle for a ball not coming at it, where an untaught learner's actions already are
@@ -77,14 +68,20 @@ def test_a_learner_taught_on_its_own_states_moves_to_the_scripted_actions(tmp_pa
     assert TrainConfig.load(tmp_path / "taught" / "config.json").teacher_steps == 100000
 
 
-def test_a_learner_taught_by_a_model_moves_to_that_models_actions(tmp_path):
-    # In Score, as above: builtin:block guards its mouth from near the middle, where an untaught
-    # learner's actions already are (a gap of 0.063, which 24,576 taught steps did not halve).
+def test_a_model_named_as_the_teacher_is_what_teaches():
     score = "Foosball-Score-v0"
     model = load_policy("builtin:score-resting")
     callback = TeacherCallback(score, {}, steps=1000, teacher="builtin:score-resting")
     obs, _ = gym.make(score).reset(seed=5)
     assert np.array_equal(callback.teacher(obs), model(obs))
+
+
+@pytest.mark.slow
+def test_a_learner_taught_by_a_model_moves_to_that_models_actions(tmp_path):
+    # In Score, as above: builtin:block guards its mouth from near the middle, where an untaught
+    # learner's actions already are (a gap of 0.063, which 24,576 taught steps did not halve).
+    score = "Foosball-Score-v0"
+    model = load_policy("builtin:score-resting")
 
     # A model's actions take longer to fit than the scripted keeper's: over 6,144 steps the
     # taught gap came out anywhere from 0.09 to 1.1 times the untaught one, by the seed (Block);
