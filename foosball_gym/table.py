@@ -157,6 +157,13 @@ def wall_bounce_slope_ratio(slope: float) -> float:
     return float(np.interp(degrees, WALL_BOUNCE_ANGLES, WALL_BOUNCE_SLOPE_RATIOS))
 
 
+def wall_bounce_along_ratio(slope: float) -> float:
+    """The share of its speed along a wall that a rolling ball keeps in a bounce, by its slope
+    across over along the wall (|vy| / |vx| at a side wall): what the wall's friction leaves
+    of it, the part of :func:`wall_bounce_slope_ratio` that is not the restitution."""
+    return BALL_RESTITUTION / wall_bounce_slope_ratio(slope)
+
+
 # What a simulation step reports about goals (seen from the home side).
 NO_GOAL = 0
 HOME_SCORED = 1  # the ball crossed the away goal line (x > 0)
