@@ -368,14 +368,23 @@ def rolling_distance(sim: TableSim, speed: float = 1.0) -> float:
     return math.inf if decel <= 0 else speed * speed / (2 * decel)
 
 
-def volley(sim: TableSim, speed: float, angle_deg: float) -> dict:
+def volley(
+    sim: TableSim, speed: float, angle_deg: float, offset: float = 0.0, phase: float = 0.0
+) -> dict:
     """The direction a volley of the scripted keeper sends an incoming ball.
 
     The ball is launched from x = 0 at ``speed`` and ``angle_deg`` from -x (positive: moving
-    towards +y), aimed to cross the keeper's line x = -0.522 at y = 0; the keeper's slide target is
-    where it crosses, and it starts wound up (spin WIND_UP_ANGLE). On the first control step
-    at whose start the ball's time to arrive, (x - keeper.x - 0.03) / |vx|, is 0.035 s or less,
-    it swings (spin target KICK_ANGLE) and keeps that target.
+    towards +y), aimed to cross the keeper's line x = -0.522 at y = 0; the keeper holds its
+    figurine at y = -``offset`` (``offset``: the ball's crossing y minus the figurine's, so the
+    ball meets the flat face near 0 and a rounded end beyond about +-0.009 m), and it starts
+    wound up (spin WIND_UP_ANGLE). On the first control step at whose start the ball's time to
+    arrive, (x - keeper.x - 0.03) / |vx|, is 0.035 s or less, it swings (spin target
+    KICK_ANGLE) and keeps that target.
+
+    ``phase`` in [0, 1) moves the ball's start back along its path by ``phase`` control
+    steps of travel (``phase * speed * control_dt``): a sweep over it makes the swing meet
+    the ball at every point of a control step, as the swing of a keeper that decides once a
+    step does.
 
     Returns:
         ``in_deg``: the ball's direction from -x (positive towards +y) on the sample before the
@@ -389,11 +398,15 @@ def volley(sim: TableSim, speed: float, angle_deg: float) -> dict:
     vx, vy = -speed * math.cos(a), speed * math.sin(a)
     if vx >= 0:
         raise ValueError(f"the ball must come towards the keeper, got angle {angle_deg} deg")
-    y0 = -vy * KEEPER.x / vx
-    slide = 0.0  # the figurine's y is the slide: where the ball crosses the keeper's line
-    sim.reset(slide=[slide], spin=[WIND_UP_ANGLE], ball_position=(0.0, y0), ball_velocity=(vx, vy))
-    none = {"in_deg": None, "out_deg": None, "out_speed": None}
+    if not 0.0 <= phase < 1.0:
+        raise ValueError(f"phase is a fraction of a control step in [0, 1), got {phase}")
     cdt = _control_dt(sim)
+    back = phase * speed * cdt
+    x0 = back * math.cos(a)
+    y0 = -vy * KEEPER.x / vx - back * math.sin(a)
+    slide = -offset  # the figurine's y is the slide
+    sim.reset(slide=[slide], spin=[WIND_UP_ANGLE], ball_position=(x0, y0), ball_velocity=(vx, vy))
+    none = {"in_deg": None, "out_deg": None, "out_speed": None}
     after = max(1, round(0.1 / cdt))
     swing = False
     in_deg = None
