@@ -16,6 +16,7 @@ import numpy as np
 from foosball_gym import table
 from foosball_gym.policies.aiming import clearance, offset_for_angle, plan_shot
 from foosball_gym.policies.deflection import deflection_offset
+from foosball_gym.policies.volley import volley_offset
 
 _WALL = table.BALL_LIMIT_Y
 # How far in front of a rod (ball centre minus rod x) a swing of the foot reaches the ball.
@@ -98,9 +99,10 @@ class ScriptedTeam:
         kick: shoot balls in reach (only with ``joints="both"``).
         aim: kick past the other team's figurines that the observation places (and into the
             goal mouth), with a corner of the foot for an angled shot or off a side wall.
-        volley: strike fast balls coming at a rod instead of blocking them (with ``kick``).
-            It scores more from shots but concedes the ones it mistimes, so it suits
-            attacking tasks, not defending.
+        volley: strike fast balls coming at a rod instead of blocking them (with ``kick``),
+            with the figurine placed where the swing sends the ball at the goal most often
+            (``policies.volley``). It scores more from shots but concedes the ones it
+            mistimes, so it suits attacking tasks, not defending.
         deflect: meet fast balls coming at a rod with still, upright feet, placed so that the
             ball bounces off towards the goal (``policies.deflection``; past the figurines the
             observation places, with ``aim``). Where no placement does, a ball is volleyed
@@ -174,6 +176,8 @@ class ScriptedTeam:
                 return move
         if self.guard_mouth and rod.role == "keeper":
             target = guarded_target(rod, x, y, vx, vy)
+        elif self.volley and own is not None and vx < -VOLLEY_MIN_SPEED and x > rod.x:
+            target = self.volley_target(rod, x, y, vx, vy)
         else:
             target = self.target_y(rod, x, y, vx, vy)
         offset = 0.0
@@ -228,6 +232,16 @@ class ScriptedTeam:
             if clearance(rod.x, cross, want, blockers) <= 0.0:
                 want = plan_shot(rod.x, cross, blockers)
         return want
+
+    @staticmethod
+    def volley_target(rod: table.Rod, x: float, y: float, vx: float, vy: float) -> float:
+        """World y where ``rod`` puts its nearest figurine to volley a fast ball coming at it:
+        off the ball's crossing point by the offset that scores most often."""
+        path = crossing(x, y, vx, vy, rod.x)
+        if path is None:
+            return y
+        cross, slope = path
+        return cross - volley_offset(cross, slope, math.hypot(vx, vy), rod.x)
 
     def _in_reach(self, rod: table.Rod, x: float, vx: float, vy: float) -> bool:
         # Only a ball lying still in front is worth the time a precise line-up takes: one
