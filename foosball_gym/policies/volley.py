@@ -4,9 +4,9 @@ for the goal.
 A volley (the keeper's feet wound up behind the rod, swung through as the ball arrives) struck
 with the flat face of the foot sends the ball off at a direction set by the ball's incoming
 angle and speed, whether or not that is at the goal. Struck with a rounded end, the direction
-turns by 15-20 degrees per 4 mm of sideways offset; but there it also depends on where within
-a control step (1/60 s, 8 cm of travel at 5 m/s) the swing meets the ball, by 6-20 degrees,
-where off the flat face it varies by a degree. So an offset is chosen not by the direction it
+turns with the sideways offset (10-20 degrees per 4 mm), but there it also depends, by tens of
+degrees, on where within a control step (1/60 s, 8 cm of travel at 5 m/s) the swing meets the
+ball, where off the flat face it moves by a few. So an offset is chosen not by the direction it
 gives on average but by how often it scores: of the swings measured at different points of a
 control step, the share whose path, side-wall bounces included, reaches the goal line inside
 the mouth (less a margin). That share is smoothed over neighbouring offsets, since the
