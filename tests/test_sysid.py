@@ -518,9 +518,11 @@ def test_a_short_calibration_log_gives_the_default_tables_physics_back(small_log
     from foosball_gym.sysid.fit import fit_logs
 
     result = fit_logs(small_logs["default"])
-    # Half a minute holds few of the ball's sliding contacts: since the scripted keeper waits
-    # between the ball and the goal, the friction of this log comes back 13 % high (0.113).
-    assert_recovered(result, DEFAULT_TRUTH, tolerances={"ball_friction": 0.15})
+    # Half a minute holds few of the ball's sliding contacts, and which ones hangs on how the
+    # keeper plays: since it waits between the ball and the goal, the friction of this log came
+    # back 13 % high (0.113); since the filter it plays through bounces the ball as the walls
+    # do, 20 % (0.120 +- 0.008). Five minutes bring it within 6 % (docs/system-identification.md).
+    assert_recovered(result, DEFAULT_TRUTH, tolerances={"ball_friction": 0.25})
 
 
 def test_sysid_writes_its_json_a_training_config_and_a_plot(small_logs, tmp_path, capsys):
