@@ -17,10 +17,11 @@ mirrored.
 from __future__ import annotations
 
 import math
-from functools import cache
 from pathlib import Path
 
 import numpy as np
+
+from foosball_gym.policies import measured
 
 TABLE_PATH = Path(__file__).with_name("deflection_table.npz")
 SPEEDS = np.arange(2.5, 7.51, 0.5)  # m/s
@@ -32,10 +33,8 @@ _JUMP = 15.0
 _FLAT = int(np.argmin(np.abs(OFFSETS)))  # the offset 0: the middle of the flat face
 
 
-@cache
 def _table() -> tuple[np.ndarray, int]:
-    with np.load(TABLE_PATH) as data:
-        return data["out_deg"], int(data["physics_revision"])
+    return measured.load(TABLE_PATH)
 
 
 def table_revision() -> int:

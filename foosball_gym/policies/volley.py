@@ -22,12 +22,12 @@ start within a control step. A ball is read at the nearest measured speed and an
 from __future__ import annotations
 
 import math
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 
 from foosball_gym import table
+from foosball_gym.policies import measured
 from foosball_gym.policies.aiming import path_y
 
 TABLE_PATH = Path(__file__).with_name("volley_table.npz")
@@ -51,10 +51,8 @@ _SIDEWAYS = 75.0  # degrees
 _FLAT = int(np.argmin(np.abs(OFFSETS)))
 
 
-@cache
 def _table() -> tuple[np.ndarray, int]:
-    with np.load(TABLE_PATH) as data:
-        return data["out_deg"], int(data["physics_revision"])
+    return measured.load(TABLE_PATH)
 
 
 def table_revision() -> int:
