@@ -2,8 +2,8 @@
 
 Both are constant-velocity filters (filterpy) that take measurements at whatever times frames
 arrive, carry on predicting through missed detections, and say when their estimate has gone
-stale. The ball's filter knows the walls: its prediction bounces off them. It mixes two models
-of the ball (filterpy's interacting multiple models), one rolling and one kicked.
+stale. The ball's filter knows the walls: its prediction bounces off them. It mixes three models
+of the ball (filterpy's interacting multiple models): kicked, rolling and lying still.
 """
 
 from __future__ import annotations
@@ -90,25 +90,45 @@ def _process_noise(dt: float, acceleration_var: float) -> np.ndarray:
     return Q
 
 
+# The still model: the position stays, the velocity is nought.
+_STILL = np.diag([1.0, 1.0, 0.0, 0.0])
+_STILL.setflags(write=False)
+
+
+@functools.lru_cache(maxsize=64)
+def _still_noise(dt: float, drift_speed: float) -> np.ndarray:
+    """The still model's noise over ``dt``: a creep of ``drift_speed``, and a trace of
+    velocity that keeps its covariance invertible."""
+    Q = np.diag([(drift_speed * dt) ** 2] * 2 + [1e-8] * 2)
+    Q.setflags(write=False)
+    return Q
+
+
 class BallFilter:
     """The ball's position and velocity from noisy, irregular, sometimes missing detections.
 
-    Two constant-velocity models run side by side and are mixed by how well each explains the
-    detections (filterpy's interacting multiple models): a ball that rolls, lies still or
-    crosses the field keeps its velocity (``rolling_acceleration_std``), and one that meets a
-    figurine or a wall changes it within a frame (``acceleration_std``). The rolling model
-    averages the camera's noise over many frames, where one model fast enough for a kick would
-    follow every frame's error: 2 mm on a ball at rest turns a shot from the goal's edge
-    several degrees.
+    Three models run side by side and are mixed by how well each explains the detections
+    (filterpy's interacting multiple models). Two keep the ball's velocity: a ball that rolls
+    or crosses the field (``rolling_acceleration_std``), and one that a figurine or a wall
+    changes within a frame (``acceleration_std``). The third holds a ball lying still
+    (``still_drift_speed``). The rolling model averages the camera's noise over many frames,
+    where one model fast enough for a kick would follow every frame's error: 2 mm on a ball at
+    rest turns a shot from the goal's edge several degrees. The still model averages further,
+    since it has no velocity to follow the noise with: an aimed kick turns about 5 degrees per
+    millimetre of the ball's offset.
 
     Args:
         measurement_std: standard deviation of a detected position (m).
         acceleration_std: the random acceleration the kicked model allows (m/s^2): figurines
             and walls change the ball's velocity abruptly.
         rolling_acceleration_std: the random acceleration the rolling model allows (m/s^2);
-            0 or None leaves the kicked model alone.
-        switch_probability: the chance per frame that the ball goes from one model to the
-            other.
+            0 or None leaves it out.
+        switch_probability: the chance per frame that a moving ball goes from the kicked model
+            to the rolling one or back.
+        still_drift_speed: how fast the still model lets a ball at rest creep (m/s); 0 or None
+            leaves it out.
+        still_switch_probability: the chance per frame that a moving ball comes to rest; a ball
+            at rest is set moving ten times as readily (a kick comes without warning).
         stale_after: seconds without a detection after which :attr:`stale` is true and the
             estimate stops moving: a ball unseen this long is held under a figurine or a hand,
             not rolling on as it was last seen.
@@ -123,25 +143,49 @@ class BallFilter:
         acceleration_std: float = 40.0,
         rolling_acceleration_std: float | None = 1.0,
         switch_probability: float = 0.05,
+        still_drift_speed: float | None = 0.006,
+        still_switch_probability: float = 0.001,
         stale_after: float = 0.2,
         reset_after: float = 0.5,
         wall_restitution: float = table.BALL_RESTITUTION,
     ) -> None:
         if not 0.0 < switch_probability < 1.0:
             raise ValueError(f"switch_probability must be in (0, 1), got {switch_probability}")
+        if not 0.0 < still_switch_probability < 0.1:
+            raise ValueError(
+                "still_switch_probability must be in (0, 0.1) (a ball at rest is set moving ten "
+                f"times as readily), got {still_switch_probability}"
+            )
         stds = [acceleration_std] + ([rolling_acceleration_std] if rolling_acceleration_std else [])
         if any(not std > 0 for std in stds):
             raise ValueError(f"acceleration stds must be positive, got {stds}")
+        if still_drift_speed is not None and still_drift_speed < 0:
+            raise ValueError(
+                f"still_drift_speed must be positive, or 0 or None to leave the still model "
+                f"out, got {still_drift_speed}"
+            )
+        self.still_drift_speed = still_drift_speed or None
+        n_moving = len(stds)
+        n = n_moving + (1 if self.still_drift_speed else 0)
         self.models = []
-        for _ in stds:
+        for _ in range(n):
             kf = _DetectionModel(dim_x=4, dim_z=2)
             kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
             kf.R = np.eye(2) * measurement_std**2
             self.models.append(kf)
+        if self.still_drift_speed:
+            self.models[-1].F = _STILL
         self.acceleration_vars = [std**2 for std in stds]
-        n = len(stds)
-        switch = np.full((n, n), switch_probability / max(n - 1, 1))
-        np.fill_diagonal(switch, 1.0 - switch_probability if n > 1 else 1.0)
+        # Row i: from model i. The moving models switch between themselves at
+        # switch_probability and come to rest at still_switch_probability.
+        switch = np.zeros((n, n))
+        if n_moving > 1:
+            switch[:n_moving, :n_moving] = switch_probability / (n_moving - 1)
+        if n > n_moving:
+            switch[:n_moving, -1] = still_switch_probability
+            switch[-1, :n_moving] = 10 * still_switch_probability / n_moving
+        np.fill_diagonal(switch, 0.0)
+        np.fill_diagonal(switch, 1.0 - switch.sum(axis=1))
         self._switch = switch
         self.imm: IMMEstimator | None = None
         self.x = np.zeros((4, 1))
@@ -208,6 +252,8 @@ class BallFilter:
             for kf, var in zip(self.models, self.acceleration_vars):
                 kf.F = F
                 kf.Q = _process_noise(dt, var)
+            if self.still_drift_speed:
+                self.models[-1].Q = _still_noise(dt, self.still_drift_speed)
             (self.imm or self.models[0]).predict()
             self._keep_inside()
             self.t = t
