@@ -194,6 +194,11 @@ def _chosen_policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
         raise CliError(f"{args.model} does not say its environment; give --env ENV_ID")
     env_kwargs = {**loaded.env_kwargs, **env_kwargs}
     check_model_fits(loaded, env_id, env_kwargs)
+    try:
+        # A residual plays over the scripted baseline for a table's camera and filter.
+        loaded = loaded.with_baseline_for(env_id, env_kwargs, on_table=True)
+    except (ValueError, TypeError) as err:
+        raise CliError(str(err)) from None
     return loaded, env_id, env_kwargs
 
 

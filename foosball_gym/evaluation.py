@@ -116,7 +116,10 @@ def evaluate(
 
     Args:
         policy: a callable from one observation to one action; one with a ``reset()`` method
-            (a recurrent policy) has it called before each episode, as has ``opponent``.
+            (a recurrent policy) has it called before each episode, as has ``opponent``. A
+            residual (:class:`~foosball_gym.training.loading.LoadedPolicy`) plays over the
+            scripted baseline of this environment's state, which on estimated state may not
+            be the one it was trained over.
         env_id: the environment.
         env_kwargs: its options, as keyword arguments of ``gymnasium.make``.
         opponent: for two-player envs, the away side's policy (None: the env's default;
@@ -156,6 +159,10 @@ def evaluate(
         check_page_path(replay)
     check_env_id(env_id)
     kwargs = dict(env_kwargs or {})
+    # A residual policy plays over the scripted baseline of this environment's state.
+    with_baseline_for = getattr(policy, "with_baseline_for", None)
+    if callable(with_baseline_for):
+        policy = with_baseline_for(env_id, kwargs)
     if video is not None:
         kwargs["render_mode"] = "rgb_array"
         kwargs.setdefault("render_width", 640)

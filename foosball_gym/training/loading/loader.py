@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -60,7 +60,10 @@ class LoadedPolicy:
     task's scripted baseline: calling it gives the whole action, baseline and correction, so
     that it plays wherever an action is expected (``foosball play`` on a real table included).
     Its ``env_kwargs`` then leave ``residual`` out (``trained_residual`` keeps the scale):
-    an environment made with them takes the whole action.
+    an environment made with them takes the whole action. The baseline is the one for the
+    state it was trained on; :meth:`with_baseline_for` gives it the baseline for where it
+    plays (``foosball eval`` and :func:`~foosball_gym.evaluation.evaluate` do so, and
+    ``foosball play`` for a table's camera and filter).
     """
 
     policy: PolicySnapshot | RllibPolicy
@@ -93,6 +96,26 @@ class LoadedPolicy:
         obs = np.asarray(obs)
         base = self.baseline(obs) if obs.ndim == 1 else [self.baseline(o) for o in obs]
         return residual_action(base, self.trained_residual, action)
+
+    def with_baseline_for(
+        self, env_id: str, env_kwargs: dict[str, Any] | None = None, on_table: bool = False
+    ) -> LoadedPolicy:
+        """This policy with the scripted baseline of where it plays: the environment
+        ``env_id`` with options ``env_kwargs``, or a table's camera and filter
+        (``on_table``); itself if it is not a residual.
+
+        The scripted baselines play the estimated state differently from the true state (the
+        Score keeper volleys a ball it would deflect, as a deflection needs the ball's path to
+        a millimetre), and a correction learned on one state is small beside its baseline.
+
+        Raises:
+            ValueError: ``env_id`` is not registered, or an option has a bad value.
+        """
+        if self.baseline is None:
+            return self
+        from foosball_gym.registration import scripted_policy
+
+        return replace(self, baseline=scripted_policy(env_id, env_kwargs, on_table))
 
     def check_env(self, env_id: str, env_kwargs: dict[str, Any] | None = None) -> None:
         """Raise ValueError where the environment's observations do not fit the policy."""
