@@ -174,6 +174,9 @@ def test_a_residual_plays_over_the_baseline_of_the_state_it_is_given():
     assert on_estimate.policy is loaded.policy and on_estimate.baseline.volley
     assert not on_estimate.baseline.deflect
     assert loaded.with_baseline_for(loaded.env_id, loaded.env_kwargs).baseline.deflect
+    # gymnasium.make's own keywords pass by.
+    longer = {**estimated, "max_episode_steps": 400}
+    assert not loaded.with_baseline_for(loaded.env_id, longer).baseline.deflect
     # evaluate() gives it the baseline of the environment it plays.
     given = evaluate(loaded, loaded.env_id, estimated, 4, seed=0)
     by_hand = evaluate(lambda obs: on_estimate(obs), loaded.env_id, estimated, 4, seed=0)

@@ -113,9 +113,16 @@ class LoadedPolicy:
         """
         if self.baseline is None:
             return self
+        import inspect
+
+        import gymnasium as gym
+
         from foosball_gym.registration import scripted_policy
 
-        return replace(self, baseline=scripted_policy(env_id, env_kwargs, on_table))
+        # gymnasium.make's own keywords (max_episode_steps, ...) are not the environment's.
+        own = set(inspect.signature(gym.make).parameters)
+        options = {k: v for k, v in (env_kwargs or {}).items() if k not in own}
+        return replace(self, baseline=scripted_policy(env_id, options, on_table))
 
     def check_env(self, env_id: str, env_kwargs: dict[str, Any] | None = None) -> None:
         """Raise ValueError where the environment's observations do not fit the policy."""
