@@ -110,6 +110,7 @@ class LoadedPolicy:
 
         Raises:
             ValueError: ``env_id`` is not registered, or an option has a bad value.
+            TypeError: an option the environment does not take.
         """
         if self.baseline is None:
             return self
