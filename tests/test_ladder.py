@@ -8,6 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from foosball_gym import table
 from foosball_gym.cli import main
 from foosball_gym.policies.attack import AttackingTeam
 from foosball_gym.policies.ladder import (
@@ -17,7 +18,12 @@ from foosball_gym.policies.ladder import (
     describe,
     parse_scripted,
 )
-from foosball_gym.policies.scripted import ScriptedTeam
+from foosball_gym.policies.scripted import (
+    KICK_ANGLE,
+    WIND_UP_ANGLE,
+    ScriptedTeam,
+    slide_for,
+)
 from foosball_gym.registration import scripted_policy
 
 LADDERS = {"Foosball-FullGame-v0": FULL_GAME_LADDER, "Foosball-KeeperVsKeeper-v0": KEEPER_LADDER}
@@ -183,3 +189,40 @@ def test_each_level_outscores_the_one_below_it(env_id):
             assert scored > 2 * conceded + 5, (n, scored, conceded)
     finally:
         env.close()
+
+
+class _PickedShot(AttackingTeam):
+    picked: float | None = 0.0
+
+    def shot_angle(self, x, y, defenders):
+        return self.picked
+
+
+def test_a_team_that_picks_its_own_shots_swings_or_holds_as_it_picks():
+    # The offence, wound up and lined up behind a resting ball in front of it: a straight shot
+    # swings at once, and a shot_angle of None keeps the foot wound up and lined up.
+    env = gym.make("Foosball-FullGame-v0")
+    try:
+        obs, _ = env.reset(seed=0)
+        names = env.unwrapped.obs_builder.names
+    finally:
+        env.close()
+    rods = [f"home_{role}" for role in table.ROLES]
+    offence = table.rod("home_offense")
+    put = {
+        "ball_x": offence.x + 0.03,
+        "ball_y": 0.05,
+        "ball_vx": 0.0,
+        "ball_vy": 0.0,
+        "home_offense_spin_pos": -1.4,
+        "home_offense_slide_pos": slide_for(offence, 0.05),
+    }
+    obs = np.array(obs, dtype=np.float64)
+    for name, value in put.items():
+        obs[names.index(name)] = value
+    team = _PickedShot(names, rods)
+    assert team.shooter(obs) == 3
+    assert team(obs)[7] == pytest.approx(KICK_ANGLE / table.SPIN_LIMIT)
+    team.picked = None
+    assert team(obs)[7] == pytest.approx(WIND_UP_ANGLE / table.SPIN_LIMIT)
+    assert team(obs)[6] == pytest.approx(put["home_offense_slide_pos"] / offence.slide_limit)

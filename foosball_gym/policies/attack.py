@@ -162,6 +162,20 @@ class AttackingTeam(ScriptedTeam):
         # matches; at the middle, 12 for and 3 against).
         return math.atan2(-cross, table.GOAL_LINE_X - rod.x)
 
+    def shot_angle(
+        self, x: float, y: float, defenders: Sequence[tuple[table.Rod, float]]
+    ) -> float | None:
+        """The direction (rad from +x) to shoot a ball at (x, y) past ``defenders`` (the other
+        team's rods with their prismatic values), or None to hold the swing: the foot stays
+        wound up and lined up behind the ball. A subclass that picks its shots another way
+        overrides this alone."""
+        return plan_shot_past(x, y, defenders, self.corner)
+
+    def shooter(self, obs: np.ndarray) -> int | None:
+        """The index of the rod that has a ball to shoot in ``obs``, if one has."""
+        x, _, vx, vy = (float(obs[i]) for i in self._ball)
+        return self._shooter(x, vx, vy)
+
     def _shooter(self, x: float, vx: float, vy: float) -> int | None:
         """The rod with a slow ball in front of it that is not coming at it, if one has."""
         if vx * vx + vy * vy >= SHOOT_SPEED**2 or vx < -APPROACHING:
@@ -178,12 +192,14 @@ class AttackingTeam(ScriptedTeam):
         at = self._spin_rate[k]
         rate = 0.0 if at is None else float(obs[at])
         defenders = [(r, float(obs[i])) for r, i in self._blockers]
-        angle = plan_shot_past(x, y, defenders, self.corner)
-        offset = offset_for_angle(angle)
+        angle = self.shot_angle(x, y, defenders)
+        offset = 0.0 if angle is None else offset_for_angle(angle)
         aimed = slide_for(rod, y - offset)
         straight = slide_for(rod, y)
         if rate > SWINGING and spin_at < KICK_ANGLE - 0.3:
             return aimed / rod.slide_limit, KICK_ANGLE / table.SPIN_LIMIT
+        if angle is None:
+            return straight / rod.slide_limit, WIND_UP_ANGLE / table.SPIN_LIMIT
         if spin_at < WOUND_UP:
             if offset == 0.0:
                 ready = abs(slide_at - straight) < STRAIGHT_TOLERANCE
