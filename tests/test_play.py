@@ -302,7 +302,11 @@ def test_real_time_frames_show_the_ball_where_it_was_when_they_were_taken():
         config.camera["calibration"] = calibration.to_dict()
         detector = build_perception(config, task_interface("Foosball-Block-v0"), 0.0)[0]
         times, seen = [], 0
-        for episode in range(2):
+        # A loaded machine renders fewer frames in time (the rest come too late to use), so
+        # shots are served until ten frames have been seen.
+        for episode in range(20):
+            if seen >= 10:
+                break
             if episode:
                 table.serve()
             for step in range(8):
