@@ -91,32 +91,41 @@ class ShotChoiceEnv(gym.Env):
         super().reset(seed=seed)
         self._obs, info = self.game.reset(seed=seed)
         self._held, self._held_steps, self._score = None, 0, (0, 0)
-        obs, _, _, _, info = self._play_on(0.0, info)
+        rod = self._choice_due()
+        if rod is not None:
+            return self._view(rod), info
+        obs, _, _, _, info = self._play_on()
         return obs, info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         self.team.choice = int(action)
         self._held, self._held_steps = self.team.shooter(self._obs), 0
-        return self._play_on(0.0, {}, step_first=True)
+        return self._play_on()
 
-    def _play_on(
-        self, reward: float, info: dict[str, Any], step_first: bool = False
-    ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    def _play_on(self) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Plays until a choice comes up or the match ends."""
+        reward = 0.0
         while True:
-            if not step_first:
-                rod = self.team.shooter(self._obs)
-                waited = OPTIONS[self.team.choice] == "wait" and self._held_steps >= WAIT_STEPS
-                if rod is not None and (rod != self._held or waited):
-                    return self._view(rod), reward, False, False, info
-                self._held = rod
-                self._held_steps += 1
-            step_first = False
             self._obs, _, terminated, truncated, info = self.game.step(self.team(self._obs))
             score = (info["goals_for"], info["goals_against"])
             reward += (score[0] - self._score[0]) - (score[1] - self._score[1])
             self._score = score
             if terminated or truncated:
                 return self._view(None), reward, terminated, truncated, info
+            rod = self._choice_due()
+            if rod is not None:
+                return self._view(rod), reward, False, False, info
+
+    def _choice_due(self) -> int | None:
+        """The rod whose shot is to be chosen now: one that has a new ball to shoot, or whose
+        held swing has waited long enough."""
+        rod = self.team.shooter(self._obs)
+        waited = OPTIONS[self.team.choice] == "wait" and self._held_steps >= WAIT_STEPS
+        if rod is not None and (rod != self._held or waited):
+            return rod
+        self._held = rod
+        self._held_steps += 1
+        return None
 
     def _view(self, rod: int | None) -> np.ndarray:
         shooter = np.zeros(len(table.ROLES), np.float32)
