@@ -4,6 +4,7 @@ simulator needed)."""
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -103,6 +104,11 @@ class CameraNoise:
             it; frames still reach the filter in the order they were taken (a frame through
             early waits for the one before it), and the filter still predicts ``latency_s``
             ahead.
+        seed: draw the camera's errors from a generator of their own, seeded by this and
+            each episode's seed, instead of the environment's. The balls stay the same and
+            only the detections change with it, so several seeds measure how much a result
+            owes to the camera's draws. None (the default) draws from the environment's
+            generator.
     """
 
     fps: float = 60.0
@@ -112,6 +118,7 @@ class CameraNoise:
     hide_under_figurines: bool = True
     latency_s: float = 0.03
     latency_jitter_s: float = 0.0
+    seed: int | None = None
 
     @classmethod
     def from_dict(cls, values: dict[str, Any] | None) -> CameraNoise:
@@ -141,4 +148,11 @@ class CameraNoise:
                 )
         if not 0 <= noise.drop_rate < 1:
             raise ValueError(f"camera_noise drop_rate must lie in [0, 1), got {noise.drop_rate}")
+        seed = noise.seed
+        if seed is not None and (
+            isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0
+        ):
+            raise ValueError(
+                f"camera_noise seed must be an integer, 0 or more, or None, got {seed!r}"
+            )
         return noise

@@ -248,6 +248,35 @@ def test_latency_jitter_makes_the_estimates_lag(make_env):
     assert errors[1] > 2 * errors[0]
 
 
+def seen_and_true(env, seed: int, steps: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    """The ball as observed and as it truly was over an episode of a still keeper."""
+    obs = [env.reset(seed=seed)[0][2:6]]
+    true = [np.array(env.unwrapped.game.ball[:4])]
+    for _ in range(steps):
+        obs.append(env.step(np.zeros(1, np.float32))[0][2:6])
+        true.append(np.array(env.unwrapped.game.ball[:4]))
+    return np.array(obs), np.array(true)
+
+
+def test_a_camera_seed_changes_the_detections_and_not_the_balls(make_env):
+    """The same balls through other detections: what several camera seeds measure."""
+
+    def camera(seed):
+        noise = {} if seed is None else {"camera_noise": {"seed": seed}}
+        return make_env("Foosball-Block-v0", estimated_state=True, **noise)
+
+    (seen_a, true_a), (seen_b, true_b), (seen_env, true_env) = (
+        seen_and_true(camera(s), 7) for s in (1, 2, None)
+    )
+    np.testing.assert_array_equal(true_a, true_b)
+    np.testing.assert_array_equal(true_a, true_env)
+    assert np.abs(seen_a - seen_b).max() > 1e-4
+    # Seeded by the camera's seed and the episode's, whatever ran before it.
+    again = camera(1)
+    seen_and_true(again, 3)
+    np.testing.assert_array_equal(seen_and_true(again, 7)[0], seen_a)
+
+
 # ------------------------------------------------------------------ defaults and checks
 
 
@@ -291,6 +320,10 @@ def jitter(value):
     return {"estimated_state": True, "camera_noise": {"latency_jitter_s": value}}
 
 
+def camera_seed(value):
+    return {"estimated_state": True, "camera_noise": {"seed": value}}
+
+
 @pytest.mark.parametrize(
     "env_id, kwargs, message",
     [
@@ -306,6 +339,8 @@ def jitter(value):
         (BLOCK, {"rod_angle_noise": 0.01}, r"rod_angle_noise needs a rod that turns"),
         (BLOCK, jitter(-0.01), r"latency_jitter_s must be a finite number, 0 or more"),
         (BLOCK, jitter(float("nan")), r"latency_jitter_s must be"),
+        (BLOCK, camera_seed(-1), r"camera_noise seed must be an integer, 0 or more, or None"),
+        (BLOCK, camera_seed(1.5), r"camera_noise seed must be an integer"),
     ],
 )
 def test_bad_values_are_refused_in_one_line_naming_what_is_allowed(env_id, kwargs, message):

@@ -121,7 +121,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
       (`foosball_gym.envs.estimated`).
     - `camera_noise`: the simulated camera's errors, a dict of the fields of
       `foosball_gym.camera.CameraNoise` (`fps`, `position_std`, `rod_std`, `drop_rate`,
-      `hide_under_figurines`, `latency_s`, `latency_jitter_s`); needs `estimated_state=True`.
+      `hide_under_figurines`, `latency_s`, `latency_jitter_s`, `seed`: the detections' own
+      seed, the balls unchanged); needs `estimated_state=True`.
     - `safety_layer`: send the action's targets through the real table's safety layer, as
       `foosball play` does: each kept inside its joint's limit less a margin (5 mm, 0.1 rad)
       and moved towards no faster than the drive's top speed and acceleration allow
@@ -388,7 +389,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             self._dynamics.update(self._rod_errors.draw(self.np_random))
             self.game.own_offsets = list(self._rod_errors.offsets)
         if self._estimated is not None:
-            self._estimated.rng = self.np_random
+            self._estimated.reseed(self.np_random, seed)
         self._start(self.task.sample_start(self.np_random, ball_position, ball_velocity, options))
         self._started = True
         self._elapsed = 0

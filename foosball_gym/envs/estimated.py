@@ -32,7 +32,8 @@ class EstimatedState:
     Args:
         builder: the task's observation builder.
         noise: the camera's errors.
-        rng: the environment's random generator (so estimates are seeded too).
+        rng: the environment's random generator (so estimates are seeded too); the camera
+            draws from a generator of its own where ``noise.seed`` is set.
     """
 
     def __init__(
@@ -49,6 +50,7 @@ class EstimatedState:
         self.builder = builder
         self.noise = noise
         self.rng = rng
+        self.reseed(rng, None)
         self.tracked = list(builder.tracked_rods)
         self._slot = {name: builder.rods_in_play.index(name) for name in self.tracked}
         self.estimator = self._new_estimator()
@@ -57,6 +59,21 @@ class EstimatedState:
         self._t = 0.0
         self._next_frame = 0.0
         self._ball_before: Sequence[float] = (0.0, 0.0, 0.0, 0.0)
+
+    def reseed(self, env_rng: np.random.Generator, episode_seed: int | None) -> None:
+        """Take the generator the camera draws from for the episode that starts.
+
+        With ``noise.seed`` unset it is the environment's. With it set, an episode given a
+        seed gets a generator of that seed and ``noise.seed``, so episode K is seen through
+        the same detections whatever ran before it; an episode without one goes on drawing
+        from the generator before it.
+        """
+        if self.noise.seed is None:
+            self.rng = env_rng
+        elif episode_seed is not None:
+            self.rng = np.random.default_rng([int(self.noise.seed), int(episode_seed)])
+        elif self.rng is env_rng:
+            self.rng = np.random.default_rng(int(self.noise.seed))
 
     def _new_estimator(self) -> TableStateEstimator:
         return self._estimator_class(self.builder, latency_s=self.noise.latency_s)
