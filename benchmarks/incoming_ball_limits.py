@@ -81,8 +81,9 @@ def crossing_errors(balls: int) -> None:
         error = 1e3 * np.abs(found[(found[:, 0] >= low) & (found[:, 0] < high), 1])
         if error.size:
             print(
-                f"  {1e3 * low:3.0f}-{1e3 * high:3.0f} ms before it arrives: median {np.median(error):4.1f}"
-                f" mm, 90th percentile {np.percentile(error, 90):4.1f} mm ({error.size} frames)"
+                f"  {1e3 * low:3.0f}-{1e3 * high:3.0f} ms before it arrives:"
+                f" median {np.median(error):4.1f} mm,"
+                f" 90th percentile {np.percentile(error, 90):4.1f} mm ({error.size} frames)"
             )
 
 
