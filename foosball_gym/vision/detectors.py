@@ -28,9 +28,12 @@ class ColourBallDetector:
 
     The frame is thresholded in HSV and closed (which fills the highlight a real ball shows);
     the largest blob in the area range is the ball, and its centre is the centroid of its
-    pixels. Pieces of the ball that a rod or a figurine cuts off are taken with it; if it is
-    partly hidden, the centre of the smallest circle around the pieces is used instead. The
-    detection's confidence is the share of that circle the ball's pixels fill (1: seen whole).
+    pixels. Pieces of the ball that a rod or a figurine cuts off are taken with it. Where a rod
+    or a figurine hides part of the ball, the centroid of what is left moves away from it: then
+    a circle is fitted to the ball's own outline, without the edges the hiding part cuts across
+    it (they lie inside the circle), and its centre is used instead. The detection's confidence
+    is the share of the smallest circle around the pieces that the ball's pixels fill (1: seen
+    whole).
     To stay fast at high frame rates, a window around where the last detections put the ball
     is searched first, and the whole frame only when the ball is not found there.
 
@@ -112,9 +115,52 @@ class ColourBallDetector:
         moments = cv2.moments(mask[y : y + h, x : x + w], binaryImage=True)
         count = moments["m00"]
         fill = count / (np.pi * max(radius, 0.5) ** 2)
-        if fill >= 0.8:  # the whole ball is seen: its centroid is more precise
+        arc = _outline_circle(outline.reshape(-1, 2).astype(float))
+        if arc is not None:  # partly hidden: the circle of its own outline
+            u, v = arc
+        elif fill >= 0.8:  # the whole ball is seen: its centroid is more precise
             u, v = x + moments["m10"] / count, y + moments["m01"] / count
         return Detection(float(u + origin[0]), float(v + origin[1]), float(min(fill, 1.0)))
+
+
+# An outline point this far (px) inside the circle fitted to the outline lies on an edge that
+# something in front of the ball cuts across it, not on the ball's rim; and a ball is taken as
+# partly hidden when at least this share of its outline lies on such edges. (Pixels along a
+# whole ball's rim lie within 1 px of the circle: its outline loses under 3 % to the cut.)
+_CUT_PX = 1.0
+_HIDDEN_SHARE = 0.05
+
+
+def _fit_circle(points: np.ndarray) -> tuple[float, float, float]:
+    """The least-squares circle through ``points`` (N x 2): centre and radius."""
+    x, y = points[:, 0], points[:, 1]
+    lhs = np.column_stack([2 * x, 2 * y, np.ones(len(x))])
+    (cu, cv, c), *_ = np.linalg.lstsq(lhs, x * x + y * y, rcond=None)
+    return float(cu), float(cv), float(np.sqrt(max(c + cu * cu + cv * cv, 0.0)))
+
+
+def _outline_circle(points: np.ndarray) -> tuple[float, float] | None:
+    """The centre of the circle of a ball's own outline, or None where the outline is the
+    whole rim (nothing hides part of the ball).
+
+    The edges that something in front of the ball cuts across it lie inside the ball's circle,
+    so a circle fitted to all of the outline leaves them inside it; they are left out and the
+    circle fitted again, until the points kept do not change.
+    """
+    if len(points) < 8:
+        return None
+    keep = np.ones(len(points), bool)
+    for _ in range(4):
+        cu, cv, r = _fit_circle(points[keep])
+        inside = np.hypot(points[:, 0] - cu, points[:, 1] - cv) - r < -_CUT_PX
+        if (keep == ~inside).all():
+            break
+        keep = ~inside
+        if keep.sum() < 5:
+            return None
+    if keep.mean() > 1 - _HIDDEN_SHARE:
+        return None
+    return cu, cv
 
 
 def decode_yolo(
