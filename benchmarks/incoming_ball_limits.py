@@ -6,6 +6,7 @@ Three measurements of why, each on ``Foosball-Score-v0`` with ``ball_start="inco
     python benchmarks/incoming_ball_limits.py --crossing 60     # the estimate's crossing point
     python benchmarks/incoming_ball_limits.py --deflection 100  # a deflection with it off
     python benchmarks/incoming_ball_limits.py --stop 40         # stopping the ball first
+    python benchmarks/incoming_ball_limits.py --cameras 100     # through better cameras
 
 ``--crossing N``: how far the crossing point of the keeper's line that the camera and the
 filter give (``estimated_state=True``, the camera's default model) lies from the true one, by
@@ -48,6 +49,13 @@ TRAP_ANGLES = (-0.6, -0.72, -0.75, -0.78, -0.8)  # rad: the foot tilted back, to
 CATCH_SHARE = 1 / 3  # of the ball's speed: the foot moving back with it stops it at e = 0.5
 CATCH_LAG = 1 / 60  # s: the drive follows a moving target about a control step late
 CATCH_HOLD = -0.5  # rad: where the caught ball is held
+# The camera's default model (2 mm, 60 frames a second, 30 ms), then better ones.
+CAMERAS = (
+    {},
+    {"position_std": 0.0005},
+    {"position_std": 0.0005, "fps": 120, "latency_s": 0.01},
+    {"position_std": 0.0002, "fps": 240, "latency_s": 0.005},
+)
 
 
 def incoming(**kwargs) -> gym.Env:
@@ -106,6 +114,31 @@ def deflections(balls: int) -> None:
                     break
             goals += bool(info["is_success"])
         print(f"  {error_mm:3.1f} mm off (standard deviation): {goals}/{balls} goals")
+
+
+def cameras(balls: int) -> None:
+    print(f"the scripted keeper on estimated state, through other cameras, {balls} balls:")
+    for camera in CAMERAS:
+        env = incoming(estimated_state=True, camera_noise=camera)
+        names = list(env.unwrapped.obs_builder.names)
+        goals = {}
+        for strike in ("deflect", "volley"):
+            keeper = ScriptedTeam(
+                names, ("home_keeper",), "both", volley=True, aim=True, deflect=strike == "deflect"
+            )
+            goals[strike] = 0
+            for seed in range(balls):
+                obs, _ = env.reset(seed=seed)
+                info: dict = {}
+                for _ in range(200):
+                    obs, _, terminated, truncated, info = env.step(keeper(obs))
+                    if terminated or truncated:
+                        break
+                goals[strike] += bool(info["is_success"])
+        print(
+            f"  camera_noise={camera}: deflecting {goals['deflect']}/{balls},"
+            f" volleying {goals['volley']}/{balls} goals"
+        )
 
 
 def stopping_spin(method: str, ahead: float, vx: float) -> float:
@@ -170,12 +203,13 @@ def main() -> None:
     parser.add_argument("--crossing", type=int, metavar="BALLS", default=0)
     parser.add_argument("--deflection", type=int, metavar="BALLS", default=0)
     parser.add_argument("--stop", type=int, metavar="BALLS", default=0)
+    parser.add_argument("--cameras", type=int, metavar="BALLS", default=0)
     args = parser.parse_args()
-    for name in ("crossing", "deflection", "stop"):
+    for name in ("crossing", "deflection", "stop", "cameras"):
         if getattr(args, name) < 0:
             parser.error(f"--{name} must be 0 or more balls, got {getattr(args, name)}")
-    if not (args.crossing or args.deflection or args.stop):
-        parser.error("ask for at least one of --crossing, --deflection and --stop")
+    if not (args.crossing or args.deflection or args.stop or args.cameras):
+        parser.error("ask for at least one of --crossing, --deflection, --stop and --cameras")
     if args.crossing:
         crossing_errors(args.crossing)
     if args.deflection:
@@ -184,6 +218,8 @@ def main() -> None:
         print(f"stopping the ball first, {args.stop} balls on the true state:")
         for method in ("catch", *map(str, TRAP_ANGLES)):
             stop_then_shoot(method, args.stop)
+    if args.cameras:
+        cameras(args.cameras)
 
 
 if __name__ == "__main__":
