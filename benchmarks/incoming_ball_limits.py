@@ -36,6 +36,7 @@ import numpy as np
 
 import foosball_gym  # noqa: F401  (registers the environments)
 from foosball_gym import table
+from foosball_gym.evaluation import evaluate
 from foosball_gym.policies.scripted import ScriptedTeam, crossing, crossing_y, slide_for
 
 ROD = table.rod("home_keeper")
@@ -58,8 +59,12 @@ CAMERAS = (
 )
 
 
+SCORE = "Foosball-Score-v0"
+INCOMING = {"ball_start": "incoming"}
+
+
 def incoming(**kwargs) -> gym.Env:
-    return gym.make("Foosball-Score-v0", ball_start="incoming", **kwargs)
+    return gym.make(SCORE, **INCOMING, **kwargs)
 
 
 def action(slide_y: float, spin: float) -> np.ndarray:
@@ -95,46 +100,43 @@ def crossing_errors(balls: int) -> None:
             )
 
 
+class ShiftedKeeper:
+    """The scripted keeper seeing every ball moved across the table by one draw per episode
+    (``evaluate`` calls ``reset`` before each)."""
+
+    def __init__(self, error_mm: float) -> None:
+        self.keeper = incoming().unwrapped.scripted_policy()
+        self.error_m = error_mm / 1e3
+        self.draws = np.random.default_rng(1)
+        self.shift = 0.0
+
+    def reset(self) -> None:
+        self.shift = float(self.draws.normal(0.0, self.error_m))
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        seen = obs.copy()
+        seen[5] += self.shift
+        return self.keeper(seen)
+
+
 def deflections(balls: int) -> None:
-    env = incoming()
-    keeper = env.unwrapped.scripted_policy()
     print(f"the deflecting keeper on the true state, its crossing point off, {balls} balls:")
     for error_mm in DEFLECTION_ERRORS_MM:
-        draws = np.random.default_rng(1)
-        goals = 0
-        for seed in range(balls):
-            obs, _ = env.reset(seed=seed)
-            shift = draws.normal(0.0, error_mm / 1e3)
-            info: dict = {}
-            for _ in range(200):
-                seen = obs.copy()
-                seen[5] += shift
-                obs, _, terminated, truncated, info = env.step(keeper(seen))
-                if terminated or truncated:
-                    break
-            goals += bool(info["is_success"])
+        goals = evaluate(ShiftedKeeper(error_mm), SCORE, INCOMING, episodes=balls).successes
         print(f"  {error_mm:3.1f} mm off (standard deviation): {goals}/{balls} goals")
 
 
 def cameras(balls: int) -> None:
     print(f"the scripted keeper on estimated state, through other cameras, {balls} balls:")
     for camera in CAMERAS:
-        env = incoming(estimated_state=True, camera_noise=camera)
-        names = list(env.unwrapped.obs_builder.names)
+        kwargs = {**INCOMING, "estimated_state": True, "camera_noise": camera}
+        names = list(incoming(estimated_state=True).unwrapped.obs_builder.names)
         goals = {}
         for strike in ("deflect", "volley"):
             keeper = ScriptedTeam(
                 names, ("home_keeper",), "both", volley=True, aim=True, deflect=strike == "deflect"
             )
-            goals[strike] = 0
-            for seed in range(balls):
-                obs, _ = env.reset(seed=seed)
-                info: dict = {}
-                for _ in range(200):
-                    obs, _, terminated, truncated, info = env.step(keeper(obs))
-                    if terminated or truncated:
-                        break
-                goals[strike] += bool(info["is_success"])
+            goals[strike] = evaluate(keeper, SCORE, kwargs, episodes=balls).successes
         print(
             f"  camera_noise={camera}: deflecting {goals['deflect']}/{balls},"
             f" volleying {goals['volley']}/{balls} goals"

@@ -49,8 +49,7 @@ class EstimatedState:
         self._estimator_class = TableStateEstimator
         self.builder = builder
         self.noise = noise
-        self.rng = rng
-        self.reseed(rng, None)
+        self.rng = rng if noise.seed is None else np.random.default_rng(int(noise.seed))
         self.tracked = list(builder.tracked_rods)
         self._slot = {name: builder.rods_in_play.index(name) for name in self.tracked}
         self.estimator = self._new_estimator()
@@ -72,8 +71,6 @@ class EstimatedState:
             self.rng = env_rng
         elif episode_seed is not None:
             self.rng = np.random.default_rng([int(self.noise.seed), int(episode_seed)])
-        elif self.rng is env_rng:
-            self.rng = np.random.default_rng(int(self.noise.seed))
 
     def _new_estimator(self) -> TableStateEstimator:
         return self._estimator_class(self.builder, latency_s=self.noise.latency_s)
