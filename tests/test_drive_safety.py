@@ -24,6 +24,7 @@ from foosball_gym.hardware.cia402.protocol import (
     CW_QUICK_STOP,
     DISABLE_OPERATION_OPTION_CODE,
     FAULT_REACTION_OPTION_CODE,
+    OPERATION_ENABLED,
     PROFILE_DECELERATION,
     QUICK_STOP_DECELERATION,
     QUICK_STOP_OPTION_CODE,
@@ -34,11 +35,11 @@ from foosball_gym.hardware.cia402.protocol import (
 from foosball_gym.hardware.drives import DEFAULT_MASTER_NODE_ID, TableDrives
 from foosball_gym.sim import TableSim
 from foosball_gym.virtual_table import SimulatedDrives
+from foosball_gym.virtual_table.drive_states import QUICK_STOP, SOD
 
 SLIDE = ("home_keeper", "slide")
 SPIN = ("home_keeper", "spin")
 DT = 1 / 60
-QUICK_STOP = "QUICK STOP ACTIVE"
 _channels = itertools.count()
 
 
@@ -110,6 +111,11 @@ def play(drives: TableDrives, steps: int, swing: bool = True) -> None:
         time.sleep(DT)
 
 
+def quick_stops(events) -> list:
+    """The quick stops a drive was sent, in order."""
+    return [e for e in events if e.what == "controlword" and e.value == CW_QUICK_STOP]
+
+
 def is_command(event) -> bool:
     """An event that carries a command of the play loop: a target (csp) or a set-point
     handshake (pp)."""
@@ -162,7 +168,7 @@ def test_a_policy_that_blocks_is_stopped_by_the_guard_within_the_watchdog_period
     for drive in table.sim_drives.drives.values():
         events = list(drive.events)
         last_command = max(e.t for e in events if is_command(e) and e.t < blocked_at)
-        stops = [e for e in events if e.what == "controlword" and e.value == CW_QUICK_STOP]
+        stops = quick_stops(events)
         assert stops, f"node {drive.joint.node_id} got no quick stop"
         stop = stops[0]
         # In order: the last command, the quick stop, then the loop wakes up; nothing in
@@ -185,12 +191,11 @@ def test_a_loop_that_stops_commanding_in_lock_step_is_stopped_by_the_guard(make_
     # A loaded machine may run the guard's thread late, or inside the last advance (whose
     # ramp then brings a slow rod to rest, and that drive switches off by itself).
     deadline = time.monotonic() + 2.0
-    while any(d.state == "OPERATION ENABLED" for d in drives) and time.monotonic() < deadline:
+    while any(d.state == OPERATION_ENABLED for d in drives) and time.monotonic() < deadline:
         time.sleep(0.005)
     for drive in drives:
-        stops = [e for e in drive.events if e.what == "controlword" and e.value == CW_QUICK_STOP]
-        assert stops, f"node {drive.joint.node_id} got no quick stop"
-        assert drive.state in (QUICK_STOP, "SWITCH ON DISABLED")
+        assert quick_stops(drive.events), f"node {drive.joint.node_id} got no quick stop"
+        assert drive.state in (QUICK_STOP, SOD)
     with pytest.raises(WatchdogTripped):
         table.drives.command({SLIDE: 0.0}, table.now)
 
@@ -279,7 +284,7 @@ def test_a_killed_master_is_noticed_by_the_drives_which_brake_and_switch_off_on_
         after = [e for e in drive.events if e.t >= lost[0].t and e.what != "sync"]
         assert [e.what for e in after] == ["master heartbeat lost", "halted", "power off"]
         assert after[-1].speed == 0.0
-        assert state_name(drive.statusword) == "SWITCH ON DISABLED"
+        assert state_name(drive.statusword) == SOD
         # No command reached it after the master died; the quick stop was its own.
         assert not [e for e in drive.events if e.t > killed_at and e.what == "controlword"]
     positions = np.array([p for p, _ in trace])
