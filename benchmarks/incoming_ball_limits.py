@@ -105,7 +105,9 @@ class ShiftedKeeper:
     (``evaluate`` calls ``reset`` before each)."""
 
     def __init__(self, error_mm: float) -> None:
-        self.keeper = incoming().unwrapped.scripted_policy()
+        env = incoming()
+        self.keeper = env.unwrapped.scripted_policy()
+        env.close()
         self.error_m = error_mm / 1e3
         self.draws = np.random.default_rng(1)
         self.shift = 0.0
@@ -128,9 +130,11 @@ def deflections(balls: int) -> None:
 
 def cameras(balls: int) -> None:
     print(f"the scripted keeper on estimated state, through other cameras, {balls} balls:")
+    env = incoming(estimated_state=True)
+    names = list(env.unwrapped.obs_builder.names)
+    env.close()
     for camera in CAMERAS:
         kwargs = {**INCOMING, "estimated_state": True, "camera_noise": camera}
-        names = list(incoming(estimated_state=True).unwrapped.obs_builder.names)
         goals = {}
         for strike in ("deflect", "volley"):
             keeper = ScriptedTeam(
