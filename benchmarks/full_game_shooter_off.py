@@ -5,7 +5,8 @@ trained full-game residual against the attacking team twice on the same seeded c
 matches: as trained, and with its correction turned off on the rod that has a ball to shoot
 (the attacking team's own shot there, untouched). It prints the goals of each.
 
-    python benchmarks/full_game_shooter_off.py RUN/checkpoints/model_N.zip [--matches 50] [--seed 5000]
+    python benchmarks/full_game_shooter_off.py RUN/checkpoints/model_N.zip \
+        [--matches 50] [--seed 5000]
 """
 
 from __future__ import annotations
