@@ -8,16 +8,26 @@ shaking a precise kick (``benchmarks/full_game_noise.py`` has what that noise co
 
     python benchmarks/full_game_choice.py --matches 50             # each shot always made
     python benchmarks/full_game_choice.py --train 40000 --matches 50 --save runs/choice
+    python benchmarks/full_game_choice.py --oracle --matches 50 --save runs/oracle.npz
+    python benchmarks/full_game_choice.py --imitate runs/oracle*.npz --matches 50 --seed 0
+    python benchmarks/full_game_choice.py --sensitivity 50 --seed 0
 
 The first plays each option on its own, and a choice at random, against the attacking team.
 The second trains PPO (Stable-Baselines3) over the choices for that many decisions in two
-processes, then plays its deterministic choices. Matches are continuous one-minute matches of
-``Foosball-FullGame-v0``, seeds 5000 on; each prints goals for and against.
+processes, then plays its deterministic choices. The third bounds what any chooser over these
+shots could gain: at each choice it plays every option out on a copy of the match (the
+opponent's replies included) and makes the one that did best, saving each choice's observation
+and the outcomes of its options. The fourth learns those outcomes from the observation and
+plays the learned choices, with no lookahead. The fifth asks how far an outcome can be known
+from the observation at all: how many outcomes a ball moved by 0.1 or 1 mm keeps. Matches are
+continuous one-minute matches of ``Foosball-FullGame-v0``, seeds 5000 on (the last three:
+from ``--seed``); each prints goals for and against.
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -38,6 +48,9 @@ from foosball_gym.policies.attack import AttackingTeam
 # to either side, or holding the swing (for WAIT_STEPS, then the choice comes up again).
 OPTIONS = ("plan", "standing", "straight", "bank", "left", "right", "wait")
 WAIT_STEPS = 6
+# How far ahead the oracle plays each option out: 2 s of play, a shot's flight and the first
+# reply to it.
+LOOKAHEAD_STEPS = 120
 SIDE_ANGLE = 0.6 * MAX_ANGLE
 FIRST_SEED = 5000
 
@@ -137,13 +150,13 @@ class ShotChoiceEnv(gym.Env):
         self.game.close()
 
 
-def play(choose: Any, matches: int) -> tuple[int, int, list[int]]:
+def play(choose: Any, matches: int, first_seed: int = FIRST_SEED) -> tuple[int, int, list[int]]:
     """Goals for and against, and how often each option was chosen, over ``matches``
     matches where ``choose(obs)`` picks each shot."""
     env = ShotChoiceEnv()
     goals_for = goals_against = 0
     counts = [0] * len(OPTIONS)
-    for seed in range(FIRST_SEED, FIRST_SEED + matches):
+    for seed in range(first_seed, first_seed + matches):
         obs, info = env.reset(seed=seed)
         done = False
         while not done:
@@ -155,6 +168,194 @@ def play(choose: Any, matches: int) -> tuple[int, int, list[int]]:
         goals_against += info["goals_against"]
     env.close()
     return goals_for, goals_against, counts
+
+
+def play_out(env: ShotChoiceEnv, choice: int, shift: float | None = None) -> int:
+    """Goals for less against in the LOOKAHEAD_STEPS after making ``choice`` in a copy of
+    ``env``, the team's plan for every later choice; stops at the first goal. ``shift`` (m)
+    puts the copy's ball back first, moved that far across the table."""
+    trial = copy.deepcopy(env)
+    if shift is not None:
+        sim = trial.game.unwrapped.sim
+        (x, y, z), orientation, velocity, spin = sim._ball_full()
+        sim._put_ball(((x, y + shift, z), orientation, velocity, spin))
+    trial.team.choice = choice
+    trial._held, trial._held_steps = trial.team.shooter(trial._obs), 0
+    start = trial._score
+    for _ in range(LOOKAHEAD_STEPS):
+        trial._obs, _, terminated, truncated, info = trial.game.step(trial.team(trial._obs))
+        scored = info["goals_for"] - start[0] - (info["goals_against"] - start[1])
+        if scored or terminated or truncated:
+            break
+        if trial._choice_due() is not None:
+            trial.team.choice = 0
+            trial._held, trial._held_steps = trial.team.shooter(trial._obs), 0
+    trial.close()
+    return scored
+
+
+def oracle(matches: int, first_seed: int, save: Path) -> None:
+    """Each choice made by playing every option out first (the plan wherever none does better),
+    over ``matches`` matches; saves every choice's observation and its options' outcomes."""
+    env = ShotChoiceEnv()
+    observations, outcomes = [], []
+    goals_for = goals_against = 0
+    start = time.perf_counter()
+    for seed in range(first_seed, first_seed + matches):
+        obs, info = env.reset(seed=seed)
+        done = False
+        while not done:
+            values = np.array([play_out(env, k) for k in range(len(OPTIONS))])
+            observations.append(obs)
+            outcomes.append(values)
+            best = 0 if values[0] == values.max() else int(np.argmax(values))
+            obs, _, terminated, truncated, info = env.step(best)
+            done = terminated or truncated
+        goals_for += info["goals_for"]
+        goals_against += info["goals_against"]
+        print(
+            f"seed {seed}: {info['goals_for']}:{info['goals_against']}, so far "
+            f"{goals_for}:{goals_against}, {len(outcomes)} choices, "
+            f"{time.perf_counter() - start:.0f} s",
+            flush=True,
+        )
+    env.close()
+    save.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(save, observations=np.array(observations), outcomes=np.array(outcomes))
+    scored, conceded = (np.array(outcomes) > 0).sum(0), (np.array(outcomes) < 0).sum(0)
+    print(f"the oracle's choices, {matches} matches: {goals_for} for, {goals_against} against")
+    print("choices where an option scored / conceded within the lookahead:")
+    for k, name in enumerate(OPTIONS):
+        print(f"  {name:9s} {scored[k]:5d} {conceded[k]:5d}")
+
+
+def sensitivity(choices: int, first_seed: int) -> None:
+    """How much of an option's outcome a ball moved by a fraction of a millimetre keeps: at
+    ``choices`` choices of the attacking team's own play, each option played out with the ball
+    put back where it was and moved 0.1 and 1 mm across (and, to check that putting it back
+    changes nothing by itself, left alone)."""
+    env = ShotChoiceEnv()
+    shifts: tuple[float | None, ...] = (None, 0.0001, 0.001)
+    same = np.zeros((len(shifts), len(OPTIONS)))
+    kept = np.zeros(len(shifts))
+    scoring = 0
+    seed, done, seen = first_seed, True, 0
+    while seen < choices:
+        if done:
+            env.reset(seed=seed)
+            seed += 1
+        base = np.array([play_out(env, k, 0.0) for k in range(len(OPTIONS))])
+        scoring += int((base > 0).sum())
+        for i, shift in enumerate(shifts):
+            moved = np.array(
+                [play_out(env, k, shift and shift * (-1) ** seen) for k in range(len(OPTIONS))]
+            )
+            same[i] += moved == base
+            kept[i] += ((moved > 0) & (base > 0)).sum()
+        seen += 1
+        _, _, terminated, truncated, _ = env.step(0)
+        done = terminated or truncated
+    env.close()
+    print(f"{choices} choices of the attacking team's play from seed {first_seed}:")
+    print(f"  options scoring with the ball put back as it was: {scoring}")
+    for i, shift in enumerate(shifts):
+        agree = ", ".join(f"{name} {n / choices:.0%}" for name, n in zip(OPTIONS, same[i]))
+        how = "left alone" if shift is None else f"moved {shift * 1000:.1f} mm"
+        print(f"  {how}: still scoring {int(kept[i])}; same outcome: {agree}")
+
+
+class OutcomeModel:
+    """Predicts, from a choice's observation, the chance that each option scores and that it
+    concedes within the lookahead; chooses the option whose chance to score less its chance to
+    concede beats the plan's by more than ``margin``."""
+
+    def __init__(self, size: int, margin: float = 0.0) -> None:
+        import torch
+
+        self.net = torch.nn.Sequential(
+            torch.nn.Linear(size, 256),
+            torch.nn.ReLU(),
+            torch.nn.Linear(256, 256),
+            torch.nn.ReLU(),
+            torch.nn.Linear(256, 2 * len(OPTIONS)),
+        )
+        self.mean = np.zeros(size, np.float32)
+        self.std = np.ones(size, np.float32)
+        self.margin = margin
+
+    def fit(self, obs: np.ndarray, outcomes: np.ndarray, epochs: int = 300) -> None:
+        import torch
+
+        self.mean, self.std = obs.mean(0), obs.std(0) + 1e-6
+        x = torch.as_tensor((obs - self.mean) / self.std, dtype=torch.float32)
+        y = torch.as_tensor(np.concatenate([outcomes > 0, outcomes < 0], 1), dtype=torch.float32)
+        optimiser = torch.optim.Adam(self.net.parameters(), lr=1e-3, weight_decay=1e-4)
+        generator = torch.Generator().manual_seed(0)
+        for _ in range(epochs):
+            for batch in torch.randperm(len(x), generator=generator).split(256):
+                loss = torch.nn.functional.binary_cross_entropy_with_logits(
+                    self.net(x[batch]), y[batch]
+                )
+                optimiser.zero_grad()
+                loss.backward()
+                optimiser.step()
+
+    def values(self, obs: np.ndarray) -> np.ndarray:
+        import torch
+
+        with torch.no_grad():
+            x = torch.as_tensor((obs - self.mean) / self.std, dtype=torch.float32)
+            p = torch.sigmoid(self.net(x)).numpy()
+        n = len(OPTIONS)
+        return p[..., :n] - p[..., n:]
+
+    def choose(self, obs: np.ndarray) -> int:
+        values = self.values(np.asarray(obs, np.float32)[None])[0]
+        best = int(np.argmax(values))
+        return best if values[best] > values[0] + self.margin else 0
+
+
+def load_outcomes(paths: Sequence[Path]) -> tuple[np.ndarray, np.ndarray]:
+    data = [np.load(path) for path in paths]
+    obs = np.concatenate([d["observations"] for d in data]).astype(np.float32)
+    return obs, np.concatenate([d["outcomes"] for d in data])
+
+
+def imitate(paths: Sequence[Path], matches: int, first_seed: int) -> None:
+    """Learns the options' outcomes from the oracle's saved choices and plays the learned
+    choices, no lookahead, on ``matches`` matches. The last fifth of the choices is held out
+    first: models learned from a quarter, half and all of the rest say how the gain over the
+    plan grows with the choices learned from, and pick the margin."""
+    import torch
+
+    obs, outcomes = load_outcomes(paths)
+    cut = len(obs) * 4 // 5
+    held, held_outcomes = obs[cut:], outcomes[cut:]
+    plan = held_outcomes[:, 0].sum()
+    best = held_outcomes.max(1).sum()
+    print(f"{len(held)} choices held out: the plan {plan:+d}, the best option each time {best:+d}")
+    margins = (0.0, 0.05, 0.1, 0.2, 0.3, 0.5)
+    gains: dict[float, int] = {}
+    for share in (4, 2, 1):
+        torch.manual_seed(0)
+        model = OutcomeModel(obs.shape[1])
+        model.fit(obs[: cut // share], outcomes[: cut // share])
+        values = model.values(held)
+        for margin in margins:
+            chosen = np.where(values.max(1) > values[:, 0] + margin, values.argmax(1), 0)
+            gains[margin] = int(held_outcomes[np.arange(len(held)), chosen].sum())
+        shown = ", ".join(f"{m:.2f}: {g:+d}" for m, g in gains.items())
+        print(f"  learned from {cut // share} choices, by margin: {shown}")
+    torch.manual_seed(0)
+    model = OutcomeModel(obs.shape[1], margin=max(gains, key=lambda m: (gains[m], m)))
+    model.fit(obs, outcomes)
+    goals_for, goals_against, counts = play(model.choose, matches, first_seed)
+    chosen_counts = ", ".join(f"{name} {n}" for name, n in zip(OPTIONS, counts))
+    print(
+        f"learned from {len(obs)} choices, margin {model.margin}, {matches} matches from seed "
+        f"{first_seed}: {goals_for} for, {goals_against} against"
+    )
+    print(f"chosen: {chosen_counts}")
 
 
 def each_option(matches: int) -> None:
@@ -219,9 +420,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--matches", type=int, default=50)
     parser.add_argument("--train", type=int, default=0, metavar="DECISIONS")
+    parser.add_argument("--oracle", action="store_true")
+    parser.add_argument("--imitate", type=Path, nargs="+", metavar="ORACLE_NPZ")
+    parser.add_argument("--sensitivity", type=int, default=0, metavar="CHOICES")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=FIRST_SEED,
+        help="the first match's seed for --oracle, --imitate and --sensitivity",
+    )
     parser.add_argument("--save", type=Path, default=Path("runs/full_game_choice"))
     args = parser.parse_args()
-    if args.train:
+    if args.sensitivity:
+        sensitivity(args.sensitivity, args.seed)
+    elif args.imitate:
+        imitate(args.imitate, args.matches, args.seed)
+    elif args.oracle:
+        oracle(args.matches, args.seed, args.save)
+    elif args.train:
         train(args.train, args.matches, args.save)
     else:
         each_option(args.matches)
