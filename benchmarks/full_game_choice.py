@@ -111,9 +111,13 @@ class ShotChoiceEnv(gym.Env):
         return obs, info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        self.team.choice = int(action)
-        self._held, self._held_steps = self.team.shooter(self._obs), 0
+        self._choose(int(action))
         return self._play_on()
+
+    def _choose(self, choice: int) -> None:
+        """Makes ``choice`` for the rod that has the ball now, held until it has shot."""
+        self.team.choice = choice
+        self._held, self._held_steps = self.team.shooter(self._obs), 0
 
     def _play_on(self) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Plays until a choice comes up or the match ends."""
@@ -179,8 +183,7 @@ def play_out(env: ShotChoiceEnv, choice: int, shift: float | None = None) -> int
         sim = trial.game.unwrapped.sim
         (x, y, z), orientation, velocity, spin = sim._ball_full()
         sim._put_ball(((x, y + shift, z), orientation, velocity, spin))
-    trial.team.choice = choice
-    trial._held, trial._held_steps = trial.team.shooter(trial._obs), 0
+    trial._choose(choice)
     start = trial._score
     for _ in range(LOOKAHEAD_STEPS):
         trial._obs, _, terminated, truncated, info = trial.game.step(trial.team(trial._obs))
@@ -188,8 +191,7 @@ def play_out(env: ShotChoiceEnv, choice: int, shift: float | None = None) -> int
         if scored or terminated or truncated:
             break
         if trial._choice_due() is not None:
-            trial.team.choice = 0
-            trial._held, trial._held_steps = trial.team.shooter(trial._obs), 0
+            trial._choose(0)
     trial.close()
     return scored
 
