@@ -579,6 +579,9 @@ def test_foosball_play_exits_on_sigterm_with_a_line_and_no_traceback(tmp_path):
     play = subprocess.Popen(
         [
             sys.executable,
+            # A session that does not end dumps its threads' stacks on SIGABRT (below).
+            "-X",
+            "faulthandler",
             "-m",
             "foosball_gym.cli",
             "play",
@@ -607,7 +610,12 @@ def test_foosball_play_exits_on_sigterm_with_a_line_and_no_traceback(tmp_path):
                 break
             time.sleep(0.1)
         play.send_signal(signal.SIGTERM)
-        out, err = play.communicate(timeout=60)
+        try:
+            out, err = play.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            play.send_signal(signal.SIGABRT)
+            _, err = play.communicate(timeout=30)
+            pytest.fail(f"foosball play ran on 60 s after SIGTERM; where it was:\n{err[-6000:]}")
     finally:
         play.kill()
     assert play.returncode == 128 + signal.SIGTERM, err
