@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from foosball_gym.envs.base import FoosballEnv
 
 ALGORITHMS = ("ppo", "sac")
-VEC_ENV_KINDS = ("dummy", "subproc")
+VEC_ENV_KINDS = ("dummy", "subproc", "batched")
 LR_SCHEDULES = ("constant", "linear")
 
 
@@ -55,7 +55,11 @@ class TrainConfig:
     )
     normalize: bool = _field(True, "normalise observations by their running mean and variance")
     normalize_reward: bool = _field(False, "scale rewards by the running spread of returns")
-    vec_env: str = _field("dummy", "dummy: environments in this process; subproc: one process each")
+    vec_env: str = _field(
+        "dummy",
+        "dummy: environments in this process; subproc: one process each; batched: split over "
+        "one process per core",
+    )
     net_arch: tuple[int, ...] = _field((256, 128, 64), "hidden layers of the networks")
     learning_rate: float = _field(1e-3, "learning rate")
     gamma: float = _field(0.99, "discount factor")

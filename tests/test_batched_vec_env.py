@@ -1,0 +1,84 @@
+"""The batched vectorised env: its environments split over worker processes behave as SB3's own
+DummyVecEnv of the same environments, seeded alike."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+import foosball_gym  # noqa: F401
+from foosball_gym.training.sb3.batched_vec_env import BatchedSubprocVecEnv
+
+ENV = "Foosball-Block-v0"
+
+
+def _play(vec_env_cls: type, actions: np.ndarray, **kwargs: object) -> tuple[list, list]:
+    venv = make_vec_env(ENV, n_envs=actions.shape[1], seed=7, vec_env_cls=vec_env_cls, **kwargs)
+    try:
+        steps: list = [venv.reset()]
+        infos = []
+        for action in actions:
+            obs, reward, done, info = venv.step(action)
+            steps += [obs, reward, done]
+            infos.append(info)
+        return steps, infos
+    finally:
+        venv.close()
+
+
+def test_batched_workers_give_the_steps_a_dummy_vec_env_gives() -> None:
+    actions = np.random.default_rng(0).uniform(-1, 1, (120, 5, 1)).astype(np.float32)
+    dummy, dummy_infos = _play(DummyVecEnv, actions)
+    # 5 environments over 2 workers: shares of 2 and 3 (or 3 and 2), not a whole division.
+    batched, batched_infos = _play(BatchedSubprocVecEnv, actions, vec_env_kwargs={"workers": 2})
+    for a, b in zip(dummy, batched, strict=True):
+        np.testing.assert_array_equal(a, b)
+    finals = 0
+    for step_a, step_b in zip(dummy_infos, batched_infos, strict=True):
+        for info_a, info_b in zip(step_a, step_b, strict=True):
+            assert info_a.keys() == info_b.keys()
+            if "terminal_observation" in info_a:
+                finals += 1
+                np.testing.assert_array_equal(
+                    info_a["terminal_observation"], info_b["terminal_observation"]
+                )
+    assert finals > 5  # episodes ended and were reset within the steps compared
+
+
+def test_calls_reach_the_environments_they_name() -> None:
+    venv = BatchedSubprocVecEnv(
+        [lambda: __import__("gymnasium").make(ENV) for _ in range(5)], workers=2
+    )
+    try:
+        assert venv.workers == 2
+        venv.set_attr("marker", "x", indices=[1, 3])
+        venv.set_attr("marker", "y", indices=[0, 2, 4])
+        assert venv.get_attr("marker") == ["y", "x", "y", "x", "y"]
+        assert venv.get_attr("marker", indices=[4, 1]) == ["y", "x"]
+        assert len(venv.env_method("scripted_policy", indices=[2, 3])) == 2
+        assert venv.env_is_wrapped(__import__("gymnasium").Wrapper) == [True] * 5
+        assert venv.has_attr("marker")
+    finally:
+        venv.close()
+        venv.close()  # twice is harmless, as SB3's own
+
+
+def test_a_failure_in_a_worker_is_raised_in_the_main_process_and_the_worker_lives_on() -> None:
+    venv = BatchedSubprocVecEnv(
+        [lambda: __import__("gymnasium").make(ENV) for _ in range(2)], workers=2
+    )
+    try:
+        with pytest.raises(AttributeError, match="no_such_method"):
+            venv.env_method("no_such_method", indices=[1])
+        venv.reset()
+        obs, _, _, _ = venv.step(np.zeros((2, 1), np.float32))
+        assert obs.shape == (2, 6)
+    finally:
+        venv.close()
+
+
+def test_more_workers_than_environments_is_refused_in_one_line() -> None:
+    with pytest.raises(ValueError, match=r"workers must lie in \[1, 2\]"):
+        BatchedSubprocVecEnv([lambda: __import__("gymnasium").make(ENV)] * 2, workers=3)
