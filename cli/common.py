@@ -372,16 +372,19 @@ def scripted(
 def load_model(spec: str, trust: bool = False) -> Any:
     """A trained policy (:class:`~foosball_gym.training.loading.LoadedPolicy`) from a run
     directory, a model zip, an RL Zoo run or ``builtin:NAME``; pickled files only with
-    ``trust``."""
+    ``trust``. Where a run has no final model, prints which of its models plays instead."""
     from foosball_gym.training import require_train_extra
 
     require_train_extra()
     from foosball_gym.training.loading import ModelLoadError, load_policy
 
     try:
-        return load_policy(spec, trust=trust)
+        loaded = load_policy(spec, trust=trust)
     except ModelLoadError as err:
         raise CliError(str(err)) from None
+    if loaded.note:
+        print(loaded.note)
+    return loaded
 
 
 def check_model_fits(loaded: Any, env_id: str, env_kwargs: dict[str, Any]) -> None:
