@@ -199,8 +199,9 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     ``vecnormalize.json`` beside it). A run from before that file (``vecnormalize.pkl``) is
     refused with a message saying how to migrate it; an RL Zoo run's ``vecnormalize.pkl``,
     with one saying to trust it. A model whose run normalised its observations but whose
-    statistics are missing, statistics that make no sense, or statistics of another size of
-    observation are refused too: the policy would act on observations it never saw.
+    statistics are missing (or whose zip records that it has none), statistics that make no
+    sense, or statistics of another size of observation are refused too: the policy would act
+    on observations it never saw.
 
     Warns with :class:`~foosball_gym.training.run_dir.physics.PhysicsMismatchWarning` where
     the model was trained on another physics revision than the current one (a run from before
@@ -273,6 +274,14 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
             f"true), but its statistics ({_find_norm_names(zip_path, run_dir)}) are missing: "
             "without them the policy acts on observations it never saw (a run killed between "
             "writing the two?); the run's other models (checkpoints/, best/) may have theirs"
+        )
+    if recorded and stats is None and config is not None and config.get("normalize", True):
+        # The zip says it was trained without statistics, its run says with: one of them is
+        # another run's, and the policy would act on observations it never saw.
+        raise ModelLoadError(
+            f"{zip_path} holds no normalisation statistics, but its run's {CONFIG_FILE} says "
+            "normalize: true: the policy would act on observations it never saw (a model of "
+            "another run?), so it is refused, as foosball train --resume refuses it"
         )
     if stats is not None and stats.norm_obs and len(stats.obs_mean) != policy_size(policy):
         raise ModelLoadError(
