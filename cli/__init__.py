@@ -17,7 +17,7 @@ from collections.abc import Sequence
 import foosball_gym
 
 from . import calibrate, dataset, envs, evaluate, league, migrate, play, replay, sysid, train
-from .common import CliError
+from .common import CliError, Parser
 
 # In the order ``foosball --help`` lists them.
 COMMANDS = (train, evaluate, dataset, league, play, replay, calibrate, sysid, envs, migrate)
@@ -26,7 +26,7 @@ __all__ = ["CliError", "build_parser", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="foosball", description="Train, evaluate and play robot foosball policies."
     )
     parser.add_argument("--version", action="version", version=foosball_gym.__version__)

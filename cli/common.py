@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import difflib
 import errno
 import importlib
 import inspect
@@ -13,11 +14,79 @@ import sys
 import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 
 class CliError(Exception):
     """A bad argument or input found after parsing; reported like argparse's errors."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser for the command and its subcommands (``add_subparsers`` makes them
+    of the class of their parent): no abbreviated options, errors in one line without the
+    usage, and a suggestion where a name is misspelt.
+
+    Abbreviations are off because they change meaning as options are added: ``--env`` was
+    taken for ``--env-kwarg`` by ``foosball train``, ``--timestep`` for ``--timesteps``.
+
+    ``hints`` maps an option the parser does not take to what to say of it, where a close
+    spelling would mislead (``foosball train --env``: the id is its first argument).
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+        self.hints: dict[str, str] = {}
+
+    def error(self, message: str) -> NoReturn:
+        # The usage would be 26 lines over the one that says what is wrong; --help has it.
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+    def parse_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> argparse.Namespace:
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            # Reported by the subcommand's parser, which knows the options meant.
+            command = self._command_parser(parsed)
+            command.error(command.unrecognized(extras))
+        return parsed
+
+    def unrecognized(self, extras: Sequence[str]) -> str:
+        """The error for arguments this parser does not take, with the option each misspelt
+        one may have meant."""
+        options = [o for a in self._actions for o in a.option_strings if o.startswith("--")]
+        notes = []
+        for extra in extras:
+            name = extra.partition("=")[0]
+            if name in self.hints:
+                notes.append(self.hints[name])
+            elif name.startswith("-"):
+                close = difflib.get_close_matches(name, options, n=1)
+                if close:
+                    notes.append(f"did you mean {close[0]}?")
+        return f"unrecognized arguments: {' '.join(extras)}" + "".join(f"; {n}" for n in notes)
+
+    def _command_parser(self, parsed: argparse.Namespace) -> Parser:
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                chosen = action.choices.get(str(getattr(parsed, action.dest, "")))
+                if isinstance(chosen, Parser):
+                    return chosen._command_parser(parsed)
+        return self
+
+    def _check_value(self, action: argparse.Action, value: Any) -> None:
+        # argparse's own check, with the choice a misspelt value may have meant.
+        choices = action.choices
+        if choices is None or value in choices:
+            return
+        names = [str(c) for c in choices]
+        close = difflib.get_close_matches(str(value), names, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise argparse.ArgumentError(
+            action,
+            f"invalid choice: {value!r}{hint} (choose from {', '.join(map(repr, names))})",
+        )
 
 
 class LibraryDefault:
@@ -168,14 +237,41 @@ def storage_failure(option: str, run: Path, err: OSError) -> str:
     return line
 
 
+def whole_number(text: str) -> int:
+    """A whole number, 0 or more, also written as ``1e5`` or ``100_000``: counts of steps are
+    often written so."""
+    try:
+        return _whole(text, minimum=0)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
 def positive_int(text: str) -> int:
+    """A whole number, at least 1, also written as ``1e5`` or ``100_000``."""
+    try:
+        return _whole(text, minimum=1)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def _whole(text: str, minimum: int) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+        try:
+            number = float(text)
+        except ValueError:
+            raise ValueError(f"expected a whole number, got {text!r}") from None
+        if not number.is_integer():
+            raise ValueError(f"expected a whole number, got {text!r}") from None
+        value = int(number)
+    if value < minimum:
+        raise ValueError(f"must be {_least(minimum)}, got {value}")
     return value
+
+
+def _least(minimum: int) -> str:
+    return "0 or more" if minimum == 0 else f"at least {minimum}"
 
 
 def seed(text: str) -> int:
@@ -276,16 +372,19 @@ def scripted(
 def load_model(spec: str, trust: bool = False) -> Any:
     """A trained policy (:class:`~foosball_gym.training.loading.LoadedPolicy`) from a run
     directory, a model zip, an RL Zoo run or ``builtin:NAME``; pickled files only with
-    ``trust``."""
+    ``trust``. Where a run has no final model, prints which of its models plays instead."""
     from foosball_gym.training import require_train_extra
 
     require_train_extra()
     from foosball_gym.training.loading import ModelLoadError, load_policy
 
     try:
-        return load_policy(spec, trust=trust)
+        loaded = load_policy(spec, trust=trust)
     except ModelLoadError as err:
         raise CliError(str(err)) from None
+    if loaded.note:
+        print(loaded.note)
+    return loaded
 
 
 def check_model_fits(loaded: Any, env_id: str, env_kwargs: dict[str, Any]) -> None:

@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.evaluation import evaluate, video_format
+from foosball_gym.evaluation import evaluate, option_sources, video_format
 
 from .common import (
     CliError,
@@ -125,6 +125,7 @@ def run(args: argparse.Namespace) -> int:
             "only episodes that run can be recorded"
         )
     env_kwargs = parse_env_kwargs(args.env_kwarg)
+    sources = option_sources({}, env_kwargs)
     if args.policy:
         env_id = args.target
         policy, name = scripted(env_id, env_kwargs, spec=args.policy), args.policy
@@ -135,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
             raise CliError(
                 f"{args.target} has no config.json naming its environment; give --env ENV_ID"
             )
+        sources = option_sources(loaded.env_kwargs, env_kwargs)
         env_kwargs = {**loaded.env_kwargs, **env_kwargs}
         policy, name = loaded, loaded.source
     opponent, opponent_name = None, None
@@ -159,6 +161,7 @@ def run(args: argparse.Namespace) -> int:
             video_episodes=video_episodes,
             video_stride=args.video_stride,
             replay=args.replay,
+            option_sources=sources,
         )
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None

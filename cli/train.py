@@ -37,6 +37,7 @@ from .common import (
     positive_number,
     seed,
     storage_failure,
+    whole_number,
 )
 from .distributed import add_rllib_arguments, run_from_args
 
@@ -64,8 +65,8 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "batch_size": {"type": positive_int},
     "learning_rate": {"type": positive_number},
     "lr_schedule": {"choices": LR_SCHEDULES},
-    "pretrain_episodes": {"type": int, "metavar": "N"},
-    "teacher_steps": {"type": int, "metavar": "N"},
+    "pretrain_episodes": {"type": whole_number, "metavar": "N"},
+    "teacher_steps": {"type": whole_number, "metavar": "N"},
     "teacher": {"metavar": "scripted|MODEL"},
     "target_kl": {"type": float},
     "log_std_init": {"type": float},
@@ -78,7 +79,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "selfplay_pool": {"type": positive_int},
     "selfplay_scripted_share": {"type": float},
     "selfplay_scripted_levels": {"type": _levels, "metavar": "N,N,..."},
-    "selfplay_gate": {"type": int, "metavar": "GAMES"},
+    "selfplay_gate": {"type": whole_number, "metavar": "GAMES"},
     "target_success": {"type": float},
     "video_every": {"type": positive_int, "metavar": "N"},
 }
@@ -94,6 +95,7 @@ def add_parser(subparsers: Any) -> None:
         help="train a policy (PPO or SAC, self-play for two players)",
         description="Train a policy on a registered environment.",
     )
+    p.hints["--env"] = "train takes the environment id without --env: foosball train ENV_ID"
     p.add_argument("env_id", nargs="?", help=fields_by_name["env_id"].metadata["help"])
     p.add_argument(
         "--env-kwarg",

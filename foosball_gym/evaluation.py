@@ -9,8 +9,8 @@ the ``train`` extra brings with matplotlib.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
@@ -24,6 +24,12 @@ if TYPE_CHECKING:
     from foosball_gym.replay import EnvRecorder
 
 Policy = Callable[[np.ndarray], Any]
+
+# Where an option played came from, as the summary says it.
+FROM_MODEL = "the model's training config"
+FROM_COMMAND_LINE = "the command line"
+GIVEN = "given"
+RESIDUAL = "the model's training config: it corrects the scripted baseline's actions"
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 # GIF delays are whole hundredths of a second and browsers play a delay under 2 of them as
@@ -70,14 +76,35 @@ class EvalResult:
     # them left the table.
     serves: int = 0
     off_table: int = 0
+    # Where each of env_kwargs came from (see evaluate's option_sources), and the scale of a
+    # residual policy's correction to the scripted baseline (None: it plays whole actions).
+    option_sources: dict[str, str] = field(default_factory=dict)
+    residual: Any = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
+    def option_lines(self) -> list[str]:
+        """The options played, one a line, each with where it came from; the options left out
+        are the environment's defaults, which the last line says."""
+        played = [
+            (f"{name}={self.env_kwargs[name]!r}", self.option_sources.get(name, GIVEN))
+            for name in sorted(self.env_kwargs)
+        ]
+        if self.residual is not None:
+            played.append((f"residual={self.residual!r}", RESIDUAL))
+        width = max((len(text) for text, _ in played), default=0)
+        lines = [f"{text:<{width}}  ({source})" for text, source in played]
+        others = "every other option" if played else "every option"
+        return [*lines, f"{others}: {self.env_id}'s default"]
+
     def table(self) -> str:
         """The result as a small text table."""
+        options = self.option_lines()
         rows = [
             ("environment", self.env_id),
+            ("options", options[0]),
+            *(("", line) for line in options[1:]),
             ("policy", self.policy),
             *([("opponent", self.opponent)] if self.opponent else []),
             ("episodes", f"{self.episodes} (seeds {self.seed}..{self.seed + self.episodes - 1})"),
@@ -111,6 +138,7 @@ def evaluate(
     video_episodes: int = 1,
     video_stride: int | None = None,
     replay: str | Path | None = None,
+    option_sources: Mapping[str, str] | None = None,
 ) -> EvalResult:
     """Run ``episodes`` episodes seeded ``seed, seed + 1, ...`` and summarise them.
 
@@ -134,6 +162,9 @@ def evaluate(
             (see :mod:`foosball_gym.replay`): the table from above with a time slider, and
             the estimate the policy saw beside the true ball where it observes through the
             simulated camera (``estimated_state``).
+        option_sources: where each of ``env_kwargs`` came from (:func:`option_sources`), for
+            the summary (:meth:`EvalResult.table`) to say; an option it leaves out is
+            ``"given"``.
 
     Raises:
         ValueError: ``episodes`` is below 1, ``env_id`` is not registered, an option has a
@@ -238,9 +269,10 @@ def evaluate(
         frames.recording.notes.append(f"seeds {seed}..{seed + episodes - 1}")
         write_html(frames.recording, cast("str | Path", replay))
     low, high = wilson_interval(successes, episodes)
+    given = dict(env_kwargs or {})
     return EvalResult(
         env_id=env_id,
-        env_kwargs=dict(env_kwargs or {}),
+        env_kwargs=given,
         policy=policy_name,
         opponent=opponent_name,
         episodes=episodes,
@@ -256,7 +288,29 @@ def evaluate(
         mean_length=float(np.mean(lengths)),
         serves=serves,
         off_table=off_table,
+        option_sources={k: (option_sources or {}).get(k, GIVEN) for k in given},
+        residual=_residual(policy),
     )
+
+
+def option_sources(trained: Mapping[str, Any], given: Mapping[str, Any]) -> dict[str, str]:
+    """Where each option of ``{**trained, **given}`` comes from: the model's training
+    configuration (``trained``, the options a loaded model keeps) or the command line
+    (``given``, which wins where both set one)."""
+    sources = dict.fromkeys(trained, FROM_MODEL)
+    for name in given:
+        over = f", over the model's {trained[name]!r}" if name in trained else ""
+        sources[name] = FROM_COMMAND_LINE + over
+    return sources
+
+
+def _residual(policy: Any) -> Any:
+    """The scale of a residual policy's correction (a loaded one playing over its baseline),
+    as a list where it is one a rod; None for any other policy."""
+    if getattr(policy, "baseline", None) is None:
+        return None
+    scale = getattr(policy, "trained_residual", None)
+    return list(scale) if isinstance(scale, tuple) else scale
 
 
 def _replay_recorder(env: gym.Env, policy_name: str, opponent_name: str | None) -> EnvRecorder:

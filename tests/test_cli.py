@@ -265,6 +265,7 @@ def test_a_bad_input_exits_with_status_2_and_one_line_naming_it(
     errors = [line for line in err.splitlines() if ": error: " in line]
     assert len(errors) == 1 and message in errors[0], err
     assert errors[0].startswith("foosball") and "Traceback" not in err
+    assert "usage:" not in err  # the line that says what is wrong is not buried under it
 
 
 @needs_train

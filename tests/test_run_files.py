@@ -142,6 +142,23 @@ def test_a_model_whose_statistics_are_missing_is_refused(run, capsys):
     load_policy(run / "best" / "model.zip")
 
 
+@pytest.mark.parametrize("model", ["model.zip", f"{CHECKPOINT}.zip", "best/model.zip"])
+def test_a_model_recorded_without_statistics_in_a_normalising_run_is_refused_as_resume_does(
+    run, capsys, model
+):
+    # Played as it is, the policy sees raw observations: 18 % where it blocks 100 % with them.
+    for path in run.rglob("*.zip"):
+        record = {"format": 1, "vecnormalize": None}
+        rewrite_zip(path, {ZIP_RECORD: json.dumps(record).encode()})
+    assert json.loads((run / "config.json").read_text())["normalize"] is True
+    with pytest.raises(ModelLoadError, match="holds no normalisation statistics.*normalize: true"):
+        load_policy(run / model)
+    for argv in (["eval", str(run / model)], ["play", str(run / model), "--table", "sim"]):
+        assert "normalize: true" in refused(argv, capsys)
+    resume = ["train", "--resume", str(run), "--timesteps", "256", "--no-progress"]
+    assert "holds no statistics" in refused(resume, capsys)
+
+
 def test_resuming_from_a_checkpoint_without_its_statistics_is_refused(run, capsys):
     as_written_before(run)
     pointer = json.loads((run / "checkpoints" / "latest.json").read_text())

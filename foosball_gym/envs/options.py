@@ -11,6 +11,7 @@ here.
 
 from __future__ import annotations
 
+import difflib
 import inspect
 import math
 import re
@@ -102,8 +103,10 @@ def check_option_names(cls: type, names: Iterable[str]) -> None:
     allowed = inspect.signature(cls).parameters
     unknown = sorted(set(names) - set(allowed))
     if unknown:
+        meant = [m for u in unknown for m in difflib.get_close_matches(u, list(allowed), n=1)]
+        hint = f"did you mean {', '.join(map(repr, meant))}? " if meant else ""
         raise TypeError(
-            f"{cls.__name__} has no option {', '.join(map(repr, unknown))}; "
+            f"{cls.__name__} has no option {', '.join(map(repr, unknown))}; {hint}"
             f"allowed: {', '.join(sorted(allowed))}"
         )
 

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 
-from foosball_gym.registration import check_env_id
+from foosball_gym.registration import ENV_IDS, check_env_id, env_class
 from foosball_gym.training.run_dir.files import atomic_write_text, read_json
 from foosball_gym.training.run_dir.physics import physics_record
 from foosball_gym.training.selfplay.rule import check_rule, default_threshold
@@ -226,6 +226,9 @@ class TrainConfig:
                 "video_every must be a whole number of steps, at least 1, or None (no clips), "
                 f"got {self.video_every!r}"
             )
+        if self.env_id in ENV_IDS:
+            # Before gym.make, which would add its own sentence to the names allowed.
+            env_class(self.env_id).check_option_names(self.env_kwargs)
         env = gym.make(self.env_id, **self.env_kwargs)  # raises on a bad env option
         try:
             two_player = bool(cast("FoosballEnv", env.unwrapped).layout.opponent)

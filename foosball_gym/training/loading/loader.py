@@ -30,11 +30,15 @@ from foosball_gym.training.loading.sb3_policies import (
     policy_from_zip,
 )
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot, policy_from_state_dict
+from foosball_gym.training.run_dir.best import read_best
 from foosball_gym.training.run_dir.files import (
+    BEST_DIR,
+    CHECKPOINT_DIR,
     CONFIG_FILE,
     LEGACY_NORM_FILE,
     MODEL_FILE,
     NORM_FILE,
+    read_latest,
 )
 from foosball_gym.training.run_dir.physics import warn_physics
 from foosball_gym.training.run_dir.storage import (
@@ -64,6 +68,10 @@ class LoadedPolicy:
     state it was trained on; :meth:`with_baseline_for` gives it the baseline for where it
     plays (``foosball eval`` and :func:`~foosball_gym.evaluation.evaluate` do so, and
     ``foosball play`` for a table's camera and filter).
+
+    ``source`` is what was loaded: the run directory or zip given, ``builtin:NAME`` as given,
+    or where a run has no final model, the zip played in its place, which ``note`` tells in
+    one line (None where the model asked for was loaded).
     """
 
     policy: PolicySnapshot | RllibPolicy
@@ -72,6 +80,7 @@ class LoadedPolicy:
     source: str = ""
     trained_residual: float | tuple[float, ...] = 0.0
     baseline: Any = None
+    note: str | None = None
 
     @property
     def observation_size(self) -> int:
@@ -173,7 +182,9 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     """Load a policy from a run directory, a model ``.zip``, an RL Zoo run, or ``builtin:NAME``.
 
     The environment id and options come from the run's ``config.json`` (next to the zip, or
-    one level up for a checkpoint); a bare zip without one loads with ``env_id=None``. An RL
+    one level up for a checkpoint); a bare zip without one loads with ``env_id=None``. A run
+    without its final ``model.zip`` (stopped before the end) gives its best model, else its
+    newest checkpoint, and says which in the policy's ``note``. An RL
     Zoo run folder (``<log>/<algo>/<env>_<n>/``, or a zip in one) gives its final model with
     the environment and options it trained on (see :func:`.rl_zoo.find_zoo_run`).
 
@@ -188,8 +199,9 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     ``vecnormalize.json`` beside it). A run from before that file (``vecnormalize.pkl``) is
     refused with a message saying how to migrate it; an RL Zoo run's ``vecnormalize.pkl``,
     with one saying to trust it. A model whose run normalised its observations but whose
-    statistics are missing, statistics that make no sense, or statistics of another size of
-    observation are refused too: the policy would act on observations it never saw.
+    statistics are missing (or whose zip records that it has none), statistics that make no
+    sense, or statistics of another size of observation are refused too: the policy would act
+    on observations it never saw.
 
     Warns with :class:`~foosball_gym.training.run_dir.physics.PhysicsMismatchWarning` where
     the model was trained on another physics revision than the current one (a run from before
@@ -229,13 +241,12 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
         zip_path, norm, run_dir, config = found.model, found.norm, found.folder, None
         env_id, env_kwargs = found.env_id, found.env_kwargs
     else:
-        if path.is_dir():
+        note = None
+        if path.is_dir() and not (path / MODEL_FILE).exists():
+            zip_path, note = unfinished_run_model(path)
+            run_dir = zip_path.parent
+        elif path.is_dir():
             run_dir, zip_path = path, path / MODEL_FILE
-            if not zip_path.exists():
-                raise ModelLoadError(
-                    f"{path} is a directory without {MODEL_FILE}: not a run of foosball_gym, "
-                    "nor an RL Zoo run (<env>/args.yml), nor an exported RLlib policy"
-                )
         else:
             zip_path, run_dir = path, path.parent
         if not zip_path.exists():
@@ -264,6 +275,14 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
             "without them the policy acts on observations it never saw (a run killed between "
             "writing the two?); the run's other models (checkpoints/, best/) may have theirs"
         )
+    if recorded and stats is None and config is not None and config.get("normalize", True):
+        # The zip says it was trained without statistics, its run says with: one of them is
+        # another run's, and the policy would act on observations it never saw.
+        raise ModelLoadError(
+            f"{zip_path} holds no normalisation statistics, but its run's {CONFIG_FILE} says "
+            "normalize: true: the policy would act on observations it never saw (a model of "
+            "another run?), so it is refused, as foosball train --resume refuses it"
+        )
     if stats is not None and stats.norm_obs and len(stats.obs_mean) != policy_size(policy):
         raise ModelLoadError(
             f"the normalisation statistics of {zip_path} are of {len(stats.obs_mean)} "
@@ -290,10 +309,59 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
         policy=snapshot,
         env_id=env_id,
         env_kwargs=env_kwargs,
-        source=str(path),
+        source=text if text.startswith("builtin:") else str(zip_path if note else path),
         trained_residual=residual,
         baseline=baseline,
+        note=note,
     )
+
+
+def unfinished_run_model(run: Path) -> tuple[Path, str]:
+    """The model to play of a run without a final ``model.zip`` (stopped by Ctrl-C, killed, or
+    still training): its best model, else its newest checkpoint; and a line saying which.
+
+    Raises:
+        ModelLoadError: it has neither: it is no run of this package, nor any other kind
+            :func:`load_policy` reads.
+    """
+    best = run / BEST_DIR / MODEL_FILE
+    if best.is_file():
+        try:
+            row = read_best(run)
+        except ValueError:
+            row = None  # the model is there; what earned it is only told
+        earned = (
+            f" (success {row['success_rate']:.0%} at {int(row['timesteps']):,} steps)"
+            if row
+            else ""
+        )
+        return best, f"{run} has no {MODEL_FILE}: playing its best model, {best}{earned}"
+    checkpoint = _newest_checkpoint(run)
+    if checkpoint is not None:
+        return checkpoint, (
+            f"{run} has no {MODEL_FILE} nor {BEST_DIR}/{MODEL_FILE}: playing its newest "
+            f"checkpoint, {checkpoint}"
+        )
+    raise ModelLoadError(
+        f"{run} is a directory without {MODEL_FILE}, {BEST_DIR}/{MODEL_FILE} or a checkpoint: "
+        "not a run of foosball_gym, nor an RL Zoo run (<env>/args.yml), nor an exported RLlib "
+        "policy"
+    )
+
+
+def _newest_checkpoint(run: Path) -> Path | None:
+    """The checkpoint ``checkpoints/latest.json`` names, or where it is missing or damaged, the
+    one of most steps (their names count the steps with leading zeros)."""
+    try:
+        latest = read_latest(run)
+    except ValueError:
+        latest = None
+    if latest is not None and "model" in latest:
+        named = run / CHECKPOINT_DIR / latest["model"]
+        if named.is_file():
+            return named
+    found = sorted((run / CHECKPOINT_DIR).glob("*.zip"))
+    return found[-1] if found else None
 
 
 def _read_policy(zip_path: Path) -> tuple[Any, bool]:
