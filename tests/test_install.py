@@ -81,3 +81,11 @@ def test_the_pinned_torch_meets_the_train_extra(source):
     wanted = next(Requirement(r) for r in train if r.startswith("torch"))
     pin = re.search(r"torch==(\d[\w.]*)", (ROOT / source).read_text())
     assert pin and wanted.specifier.contains(pin[1]), (wanted, pin)
+
+
+def test_the_pages_install_foosball_gym_from_its_clone():
+    # foosball_gym is not on PyPI: "pip install foosball_gym[...]" finds nothing there.
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    from_index = re.compile(r"pip install [\"']?foosball_gym")
+    offending = [p.relative_to(ROOT).as_posix() for p in pages if from_index.search(p.read_text())]
+    assert not offending, offending
