@@ -159,6 +159,7 @@ def run(args: argparse.Namespace) -> int:
             video_episodes=video_episodes,
             video_stride=args.video_stride,
             replay=args.replay,
+            progress=True,
         )
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None
