@@ -89,3 +89,15 @@ def test_the_pages_install_foosball_gym_from_its_clone():
     from_index = re.compile(r"pip install [\"']?foosball_gym")
     offending = [p.relative_to(ROOT).as_posix() for p in pages if from_index.search(p.read_text())]
     assert not offending, offending
+
+
+def test_the_docs_extra_brings_what_formats_the_signatures():
+    # mkdocstrings sets each signature apart and formats it with Ruff or Black where one is
+    # installed; with neither, an environment's signature is one line cut at the page's edge.
+    setup = configparser.ConfigParser()
+    setup.read(ROOT / "setup.cfg")
+    docs = [Requirement(r).name for r in setup["options.extras_require"]["docs"].split("\n") if r]
+    assert {"ruff", "black"} & set(docs), docs
+    options = (ROOT / "mkdocs.yml").read_text()
+    assert "separate_signature: true" in options
+    assert re.search(r"^\s+line_length: \d+$", options, re.M)
