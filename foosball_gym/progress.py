@@ -107,18 +107,21 @@ class Progress:
             self._last_line = now
             self._write(self.line(now))
 
-    def line(self, now: float | None = None) -> str:
-        """Where the work stands, as one plain line."""
+    def line(self, now: float | None = None, ended: bool = False) -> str:
+        """Where the work stands, as one plain line; ``ended``: where it ended, with no time
+        left to guess (a training that reached its target ends short of its total)."""
         now = time.monotonic() if now is None else now
         elapsed = now - self._start
-        parts = [f"{self.what}: {self.done:,}/{self.total:,}{' ' + self.unit if self.unit else ''}"]
+        count = f"{self.done:,}/{self.total:,}{' ' + self.unit if self.unit else ''}"
         if self.total:
-            parts[0] += f" ({100 * self.done / self.total:.0f} %)"
+            count += f" ({100 * self.done / self.total:.0f} %)"
+        early = ended and self.done < self.total
+        parts = [f"{self.what}: {'ended at ' if early else ''}{count}"]
         if self.note:
             parts.append(self.note)
         parts.append(f"{_duration(elapsed)} elapsed")
         done_here = self.done - self._initial
-        if 0 < done_here and self.done < self.total:
+        if not ended and 0 < done_here and self.done < self.total:
             left = elapsed / done_here * (self.total - self.done)
             parts.append(f"about {_duration(left)} left")
         return ", ".join(parts)
@@ -131,7 +134,7 @@ class Progress:
         if self._bar is not None:
             self._bar.close()
         else:
-            self._write(self.line())
+            self._write(self.line(ended=True))
 
     def _write(self, text: str) -> None:
         print(text, file=self.stream, flush=True)

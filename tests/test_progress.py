@@ -45,7 +45,7 @@ def test_a_count_off_a_terminal_writes_no_line_before_its_interval():
     count.update()
     assert stream.getvalue() == ""
     count.close()
-    assert stream.getvalue().startswith("eval: 1/3 episodes (33 %)")
+    assert stream.getvalue().startswith("eval: ended at 1/3 episodes (33 %)")
 
 
 @needs_train  # tqdm comes with the train extra
@@ -112,3 +112,15 @@ def test_dataset_shows_the_episodes_it_records(tmp_path, capsys):
     argv += ["--dataset-id", "foosball/block/progress-v0", "--data-path", str(tmp_path)]
     assert main(argv) == 0
     assert re.search(r"^dataset: 2/2 episodes \(100 %\)", capsys.readouterr().err, re.M)
+
+
+def test_a_count_that_ends_short_says_where_it_ended_with_no_time_left_to_guess():
+    # A training that reaches its target success stops at 2 % of its steps: its last line
+    # must not read as a job stalled with minutes to go.
+    stream = io.StringIO()
+    count = Progress(500_736, "train", "steps", stream=stream, every_s=3600)
+    count.update(10_000)
+    count.close()
+    line = stream.getvalue().strip()
+    assert line.startswith("train: ended at 10,000/500,736 steps (2 %)"), line
+    assert "left" not in line

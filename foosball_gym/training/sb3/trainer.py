@@ -241,7 +241,8 @@ def _train(
     total = steps_run(model, done_steps, remaining) if remaining else done_steps
     if continuing:
         print(f"continuing {out} from its checkpoint at step {done_steps:,}, to {total:,}")
-    if total > max(config.timesteps, done_steps):
+    # Rounding up by a rollout is worth a word where it is no small part of the run.
+    if total - max(config.timesteps, done_steps) > config.timesteps // 10:
         print(
             f"training to {total:,} steps, not {config.timesteps:,}: {type(model).__name__} "
             f"collects {rollout_steps(model):,} steps at a time"
