@@ -250,6 +250,8 @@ def _train(
     if progress_bar:
         # After the evaluations, so that the bar shows the one just made.
         own.append(ProgressCallback(total, evaluations))
+    # Loading a model teacher gave PyTorch one thread, as for any policy that plays.
+    th.set_num_threads(config.torch_threads)
     try:
         if remaining:
             with stop.installed():
