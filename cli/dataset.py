@@ -138,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
             description=args.description,
             data_path=args.data_path,
             overwrite=args.force,
+            progress=True,
             **given(args, "episodes", "seed"),
         )
     except (ValueError, TypeError, FileExistsError) as err:

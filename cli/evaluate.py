@@ -162,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
             video_stride=args.video_stride,
             replay=args.replay,
             option_sources=sources,
+            progress=True,
         )
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None

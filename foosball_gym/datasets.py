@@ -21,6 +21,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from foosball_gym.progress import Progress
 from foosball_gym.registration import __version__, check_env_id
 from foosball_gym.table import PHYSICS_REVISION
 
@@ -83,6 +84,7 @@ def record_dataset(
     description: str | None = None,
     data_path: str | Path | None = None,
     overwrite: bool = False,
+    progress: bool = False,
 ) -> Any:
     """Record ``episodes`` episodes of ``policy`` playing ``env_id``, seeded ``seed, seed + 1,
     ...``, as the Minari dataset ``dataset_id``, infos included.
@@ -108,6 +110,8 @@ def record_dataset(
         data_path: the folder of Minari's datasets to write into (None: Minari's own, see
             :func:`datasets_root`).
         overwrite: replace a dataset of the same id; without it such a dataset is an error.
+        progress: show the episodes recorded on standard error, a bar on a terminal and a
+            line now and then elsewhere (:class:`~foosball_gym.progress.Progress`).
 
     Returns:
         The dataset as ``minari.load_dataset`` gives it (a ``minari.MinariDataset``).
@@ -154,7 +158,7 @@ def record_dataset(
                 env.close()
                 raise
             try:
-                _play(collector, policy, episodes, seed)
+                _play(collector, policy, episodes, seed, progress)
                 with warnings.catch_warnings():
                     # Advice for datasets to be published; the fields left out are not known.
                     warnings.filterwarnings("ignore", message=r"`\w+` is set to None")
@@ -211,19 +215,21 @@ def _check_can_record(policy: Policy, env_id: str, env: gym.Env) -> None:
         )
 
 
-def _play(collector: gym.Env, policy: Policy, episodes: int, seed: int) -> None:
+def _play(collector: gym.Env, policy: Policy, episodes: int, seed: int, progress: bool) -> None:
     space = collector.action_space
     assert isinstance(space, gym.spaces.Box)  # every foosball environment's
-    for i in range(episodes):
-        obs, _ = collector.reset(seed=seed + i)
-        done = False
-        while not done:
-            action = np.asarray(policy(obs), dtype=space.dtype).reshape(space.shape)
-            # What the environment plays: it clips as well, so the dataset holds the action
-            # the rods were given, inside the action space.
-            action = np.clip(action, space.low, space.high)
-            obs, _, terminated, truncated, _ = collector.step(action)
-            done = terminated or truncated
+    with Progress(episodes, "dataset", "episodes", enabled=progress) as count:
+        for i in range(episodes):
+            obs, _ = collector.reset(seed=seed + i)
+            done = False
+            while not done:
+                action = np.asarray(policy(obs), dtype=space.dtype).reshape(space.shape)
+                # What the environment plays: it clips as well, so the dataset holds the
+                # action the rods were given, inside the action space.
+                action = np.clip(action, space.low, space.high)
+                obs, _, terminated, truncated, _ = collector.step(action)
+                done = terminated or truncated
+            count.update()
 
 
 @contextlib.contextmanager

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, cast
 import gymnasium as gym
 import numpy as np
 
+from foosball_gym.progress import Progress
 from foosball_gym.registration import check_env_id
 
 if TYPE_CHECKING:
@@ -139,6 +140,7 @@ def evaluate(
     video_stride: int | None = None,
     replay: str | Path | None = None,
     option_sources: Mapping[str, str] | None = None,
+    progress: bool = False,
 ) -> EvalResult:
     """Run ``episodes`` episodes seeded ``seed, seed + 1, ...`` and summarise them.
 
@@ -165,6 +167,8 @@ def evaluate(
         option_sources: where each of ``env_kwargs`` came from (:func:`option_sources`), for
             the summary (:meth:`EvalResult.table`) to say; an option it leaves out is
             ``"given"``.
+        progress: show the episodes played on standard error, a bar on a terminal and a
+            line now and then elsewhere (:class:`~foosball_gym.progress.Progress`).
 
     Raises:
         ValueError: ``episodes`` is below 1, ``env_id`` is not registered, an option has a
@@ -220,6 +224,7 @@ def evaluate(
     frames = None if replay is None else _replay_recorder(env, policy_name, opponent_name)
     rewards, lengths = [], []
     successes = goals_for = goals_against = serves = off_table = 0
+    count = Progress(episodes, "eval", "episodes", enabled=progress)
     try:
         for i in range(episodes):
             start_episode(policy, None if isinstance(opponent, str) else opponent)
@@ -259,7 +264,10 @@ def evaluate(
             else:
                 goals_for += info["goal"] == 1
                 goals_against += info["goal"] == -1
+            count.set_note(f"success {100 * successes / (i + 1):.1f} %")
+            count.update()
     finally:
+        count.close()
         if writer is not None:
             writer.close()
         env.close()

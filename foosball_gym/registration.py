@@ -178,13 +178,18 @@ def scripted_policy(
     return task.scripted_level(level, names, precise)
 
 
-def describe_envs() -> str:
-    """Every registered environment with its spaces, and each option with its default, the
-    values it takes where they are few, and the first sentence of its description."""
+def describe_envs(env_id: str | None = None) -> str:
+    """Every registered environment (or only ``env_id``) with its spaces, and each option with
+    its default, the values it takes where they are few, and the first sentence of its
+    description.
+
+    Raises:
+        ValueError: ``env_id`` is not registered; the message names the ids that are.
+    """
     from foosball_gym.envs.options import summary
 
     lines = []
-    for entry in ENVS:
+    for entry in ENVS if env_id is None else [env_entry(env_id)]:
         env = gym.make(entry.id)
         cls = type(cast("FoosballEnv", env.unwrapped))
         lines.append(

@@ -6,6 +6,9 @@ A change to the environments that silently breaks a shipped policy fails here.
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 import warnings
 
 import gymnasium as gym
@@ -190,3 +193,37 @@ def test_a_residual_plays_over_the_baseline_of_the_state_it_is_given():
     # One that is not a residual is itself wherever it plays.
     resting = load_policy("builtin:score-resting")
     assert resting.with_baseline_for(resting.env_id, {"estimated_state": True}) is resting
+
+
+def _torch_threads_after(code: str, **env: str) -> tuple[int, int]:
+    """PyTorch's threads in a fresh interpreter before and after ``code``, with the thread
+    variables of this process left out and ``env`` added."""
+    clean = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    script = f"import torch\nbefore = torch.get_num_threads()\n{code}\n"
+    script += "print(before, torch.get_num_threads())"
+    result = subprocess.run(
+        [sys.executable, "-c", script],
+        env={**clean, **env},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    before, after = result.stdout.split()[-2:]
+    return int(before), int(after)
+
+
+LOAD = "import foosball_gym\nfoosball_gym.load_policy('builtin:block')"
+EVAL = "from foosball_gym.cli import main\nmain(['eval', 'builtin:block', '--episodes', '1'])"
+
+
+@pytest.mark.parametrize("code", [LOAD, EVAL], ids=["load_policy", "foosball eval"])
+def test_a_policy_plays_on_one_torch_thread(code):
+    before, after = _torch_threads_after(code)
+    if before == 1:
+        pytest.skip("PyTorch has one thread here anyway")
+    assert after == 1
+
+
+def test_omp_num_threads_still_gives_a_policy_more_threads():
+    assert _torch_threads_after(LOAD, OMP_NUM_THREADS="2") == (2, 2)

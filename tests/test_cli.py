@@ -476,3 +476,30 @@ def chessboard_views(K, size, pattern, square):
         M = cv2.getPerspectiveTransform(corners_px, uv.reshape(4, 2).astype(np.float32))
         views.append(cv2.warpPerspective(board, M, size, borderValue=255))
     return views
+
+
+def test_envs_shows_one_environment_when_given_its_id(capsys):
+    assert main(["envs", "Foosball-Score-v0"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("Foosball-Score-v0  (")
+    assert "ball_start = 'resting'" in out
+    others = [env_id for env_id in foosball_gym.ENV_IDS if env_id != "Foosball-Score-v0"]
+    assert not [env_id for env_id in others if env_id in out]
+
+
+def test_envs_with_an_unknown_id_names_the_registered_ones(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["envs", "Foosball-Scor-v0"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert "Foosball-Scor-v0" in err and "Foosball-Score-v0" in err and "usage" not in err
+
+
+def test_envs_describes_each_option_without_sending_the_reader_to_another_environment(capsys):
+    assert main(["envs"]) == 0
+    out = capsys.readouterr().out
+    # An option's description is the indented line under "name = default".
+    described = re.findall(r"^    (\w+) = .*\n((?:        .*\n)+)", out, re.M)
+    assert len(described) > 50, out[:500]
+    for name, text in described:
+        assert not re.search(r"\bas \w+'s\b", text), (name, text)

@@ -6,6 +6,7 @@ leaves out an import it needs fails here as it would for a reader.
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -53,3 +54,17 @@ def test_the_new_task_of_add_a_task_plays():
     assert "'home_keeper_slide_pos', 'home_defense_slide_pos'" in result.stdout
     blocked = int(re.search(r"blocked (\d+) of 20", result.stdout)[1])
     assert blocked >= 15, result.stdout
+
+
+def test_the_any_shot_speeds_quoted_are_those_builtin_block_trains_on():
+    config = json.loads((ROOT / "foosball_gym" / "builtin" / "block" / "config.json").read_text())
+    low, high = config["env_kwargs"]["speed_range"]
+    for page in ("README.md", "docs/envs/index.md"):
+        row = next(
+            line
+            for line in (ROOT / page).read_text().splitlines()
+            if line.startswith("| [`Foosball-Block-v0`]")
+        )
+        quoted = re.search(r"any shot\]\([^)]*\):[^|]*?(\d+)-(\d+) m/s", row)
+        assert quoted, f"{page}: {row}"
+        assert (float(quoted[1]), float(quoted[2])) == (low, high), f"{page}: {row}"

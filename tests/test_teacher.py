@@ -127,3 +127,41 @@ def test_a_model_that_cannot_teach_this_learner_is_refused(teacher, env_kwargs, 
 def test_what_the_teacher_cannot_do_is_refused(overrides, message):
     with pytest.raises(ValueError, match=message):
         TrainConfig(ENV, **{"teacher_steps": 1000, **overrides}).check()
+
+
+def test_a_model_teacher_leaves_the_run_its_torch_threads(tmp_path, monkeypatch):
+    # Loading a model gives PyTorch one thread (a policy that plays needs no more) where no
+    # thread variable is set; a run that loads its teacher still trains with the threads its
+    # settings ask for.
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from foosball_gym.training.sb3.trainer import train
+
+    class Threads(BaseCallback):
+        seen: set[int] = set()
+
+        def _on_step(self) -> bool:
+            self.seen.add(torch.get_num_threads())
+            return True
+
+    config = TrainConfig(
+        "Foosball-Score-v0",
+        timesteps=64,
+        n_envs=1,
+        n_steps=64,
+        batch_size=64,
+        n_epochs=1,
+        eval_episodes=1,
+        teacher_steps=64,
+        teacher="builtin:score-resting",
+        torch_threads=2,
+    )
+    for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        monkeypatch.delenv(name, raising=False)
+    before = torch.get_num_threads()
+    try:
+        train(config, tmp_path / "run", callbacks=[Threads()])
+    finally:
+        torch.set_num_threads(before)
+    assert Threads.seen == {2}

@@ -64,8 +64,15 @@ class ScoreEnv(FoosballEnv):
     - `serve_y_range`: where across the table an incoming ball starts, `(low, high)` in m;
       within [-0.32275, 0.32275].
     - `bank_share`: the share of the incoming shots aimed off a side wall, in [0, 1].
-    - `bank_aim`, `double_bank_share`, `beside_mouth`, `rebound_share`: the incoming shots of
-      any kind a player plays, as Block's (`Foosball-Block-v0`).
+    - `bank_aim`: how the banked incoming shots are aimed: `"model"` at the middle of the
+      mouth allowing for the simulated wall's flattening, `"mirror"` by equal angles, as a
+      player aims.
+    - `double_bank_share`: the share of the incoming shots aimed off both side walls, in
+      [0, 1]; with `bank_share` at most 1.
+    - `beside_mouth`: how far beyond each post (m, in [0, 0.1]) straight, mirrored and double
+      incoming shots may be aimed.
+    - `rebound_share`: the share of the incoming balls that come back off the own defence, in
+      [0, 1].
 
     The other arguments are those every environment takes, described under
     [FoosballEnv][foosball_gym.envs.base.FoosballEnv]. Score has no opponent:

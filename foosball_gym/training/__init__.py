@@ -59,7 +59,8 @@ def require_train_extra() -> None:
     except ImportError as err:
         raise ImportError(
             f"foosball_gym.training needs Stable-Baselines3 and PyTorch ({err.name} is missing);"
-            ' install them with: pip install torch==2.13.0 && pip install "foosball_gym[train]"'
+            " install them with: pip install torch==2.13.0 --extra-index-url"
+            ' https://download.pytorch.org/whl/cpu && pip install -e ".[train]" (in the clone)'
         ) from err
 
 

@@ -30,6 +30,7 @@ from foosball_gym.training.loading.sb3_policies import (
     policy_from_zip,
 )
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot, policy_from_state_dict
+from foosball_gym.training.loading.threads import use_one_torch_thread
 from foosball_gym.training.run_dir.best import read_best
 from foosball_gym.training.run_dir.files import (
     BEST_DIR,
@@ -210,6 +211,10 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     :class:`~foosball_gym.training.run_dir.physics.UnknownPhysicsWarning`: its revision is
     unknown.
 
+    PyTorch is left with one thread, unless ``OMP_NUM_THREADS`` asks for another number
+    (:func:`~foosball_gym.training.loading.threads.use_one_torch_thread`): more only slow a
+    policy that plays one observation at a time.
+
     Args:
         spec: the run directory, the model zip, the RL Zoo run folder, or ``builtin:NAME``.
         trust: also read pickled files (a legacy or RL Zoo ``vecnormalize.pkl``): only for
@@ -218,6 +223,7 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
     Raises:
         ModelLoadError: no model there, or it cannot be read (or only by unpickling, untrusted).
     """
+    use_one_torch_thread()
     text = str(spec)
     if text.startswith("builtin:"):
         path = builtin_path(text.split(":", 1)[1])

@@ -1,5 +1,5 @@
 """The callbacks every Stable-Baselines3 run has: its evaluation curve and best model, its
-checkpoints, and its stop on a signal."""
+checkpoints, its stop on a signal, and its progress."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 
 from foosball_gym.evaluation import evaluate
+from foosball_gym.progress import Progress
 from foosball_gym.training.config import TrainConfig
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
 from foosball_gym.training.run_dir.best import BestModel
@@ -44,6 +45,10 @@ class EvalCurveCallback(BaseCallback):
         self.stop = stop
         self._start = time.perf_counter()
         self._next = 0
+        # The success rate of the last evaluation, for the progress bar: a resumed run's is
+        # in the curve it goes on from (None: none yet).
+        rows = self.curve.rows()
+        self.last_success: float | None = rows[-1]["success_rate"] if rows else None
         self.reached: dict[str, Any] | None = None
         self._going_on = True
 
@@ -84,6 +89,7 @@ class EvalCurveCallback(BaseCallback):
         wall = self.wall_offset + time.perf_counter() - self._start
         row = eval_row(res, self.num_timesteps, wall)
         self.curve.append(row)
+        self.last_success = res.success_rate
         self.logger.record("eval/success_rate", res.success_rate)
         self.logger.record("eval/mean_reward", res.mean_reward)
         self.best.offer(row, self._save_best)
@@ -95,6 +101,51 @@ class EvalCurveCallback(BaseCallback):
 
     def _save_best(self, best: Path) -> None:
         save_model(self.model, best / MODEL_FILE)
+
+
+def rollout_steps(model: Any) -> int:
+    """The steps ``model.learn`` takes at a time, over all its environments: an on-policy
+    algorithm's rollout (``n_steps`` of each), else one step of each."""
+    return int(getattr(model, "n_steps", 1) or 1) * int(model.n_envs)
+
+
+def steps_run(model: Any, done: int, remaining: int) -> int:
+    """The step count ``model.learn(remaining)`` ends at, from ``done``: ``remaining``
+    rounded up to whole rollouts, as SB3 runs them."""
+    rollout = rollout_steps(model)
+    return done + -(-remaining // rollout) * rollout
+
+
+class ProgressCallback(BaseCallback):
+    """The run's steps on standard error (:class:`~foosball_gym.progress.Progress`), up to
+    ``total`` (what the run ends at, whole rollouts), with the success rate of the last
+    evaluation of ``evaluations``."""
+
+    def __init__(self, total: int, evaluations: EvalCurveCallback) -> None:
+        super().__init__()
+        self.total = total
+        self.evaluations = evaluations
+        self.count: Progress | None = None
+        self._seen = 0
+        self._shown: float | None = None
+
+    def _on_training_start(self) -> None:
+        self._seen = self.num_timesteps
+        self.count = Progress(self.total, "train", "steps", initial=self._seen)
+
+    def _on_step(self) -> bool:
+        assert self.count is not None
+        last = self.evaluations.last_success
+        if last is not None and last != self._shown:
+            self._shown = last
+            self.count.set_note(f"last evaluation {100 * last:.1f} %")
+        self.count.update(self.num_timesteps - self._seen)
+        self._seen = self.num_timesteps
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.count is not None:
+            self.count.close()
 
 
 class CheckpointCallback(BaseCallback):

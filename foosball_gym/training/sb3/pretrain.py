@@ -20,6 +20,7 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.vec_env import VecNormalize
 
+from foosball_gym.progress import Progress
 from foosball_gym.training.config import TrainConfig
 from foosball_gym.training.run_dir.files import PRETRAIN_FILE, atomic_write_text
 
@@ -42,14 +43,17 @@ def collect(
     gamma: float,
     noise: float = 0.1,
     seed: int = 0,
+    progress: bool = False,
 ) -> Demonstrations:
-    """Play ``episodes`` episodes with the task's scripted policy and record them."""
+    """Play ``episodes`` episodes with the task's scripted policy and record them
+    (``progress``: show the episodes played on standard error)."""
     env = gym.make(env_id, **env_kwargs)
     policy = cast("FoosballEnv", env.unwrapped).scripted_policy()
     rng = np.random.default_rng(seed)
     obs_all, act_all = [], []
     ret_all: list[float] = []
     successes = 0
+    count = Progress(episodes, "demonstrations", "episodes", enabled=progress)
     try:
         for i in range(episodes):
             obs, info = env.reset(seed=seed + i)
@@ -68,7 +72,9 @@ def collect(
                 g = r + gamma * g
                 episode_returns.append(g)
             ret_all.extend(reversed(episode_returns))
+            count.update()
     finally:
+        count.close()
         env.close()
     return Demonstrations(
         np.array(obs_all, np.float32),
@@ -85,8 +91,10 @@ def clone(
     batch_size: int = 256,
     learning_rate: float = 1e-3,
     seed: int = 0,
+    progress: bool = False,
 ) -> dict[str, float]:
-    """Fit ``model``'s policy (action mean) and value function to the demonstrations.
+    """Fit ``model``'s policy (action mean) and value function to the demonstrations
+    (``progress``: show the epochs on standard error).
 
     The model's VecNormalize statistics, if any, are first set from the demonstrations, so
     the network sees the observations it was fitted on.
@@ -110,7 +118,9 @@ def clone(
     gen = th.Generator().manual_seed(seed)
     policy.set_training_mode(True)
     action_loss = value_loss = th.tensor(0.0)
+    count = Progress(epochs, "cloning", "epochs", enabled=progress)
     for _ in range(epochs):
+        count.update()
         for idx in th.randperm(len(obs_t), generator=gen).split(batch_size):
             features = policy.extract_features(obs_t[idx])
             latent_pi, latent_vf = policy.mlp_extractor(features)
@@ -125,13 +135,15 @@ def clone(
     with th.no_grad():
         policy.value_net.weight.mul_(scale)
         policy.value_net.bias.mul_(scale)
+    count.close()
     policy.set_training_mode(False)
     return {"action_mse": action_loss.item(), "value_mse": value_loss.item()}
 
 
-def pretrain(model: Any, config: TrainConfig, out: Path) -> None:
+def pretrain(model: Any, config: TrainConfig, out: Path, progress: bool = False) -> None:
     """Clone ``config.pretrain_episodes`` episodes of the scripted baseline into ``model``,
-    and record how it went in the run's ``pretrain.json``."""
+    and record how it went in the run's ``pretrain.json`` (``progress``: show the episodes
+    and the epochs on standard error)."""
     start = time.perf_counter()
     demos = collect(
         config.env_id,
@@ -139,8 +151,9 @@ def pretrain(model: Any, config: TrainConfig, out: Path) -> None:
         config.pretrain_episodes,
         config.gamma,
         seed=config.seed,
+        progress=progress,
     )
-    fit = clone(model, demos, seed=config.seed)
+    fit = clone(model, demos, seed=config.seed, progress=progress)
     record = {
         "episodes": config.pretrain_episodes,
         "samples": len(demos.actions),

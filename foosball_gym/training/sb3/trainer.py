@@ -32,7 +32,14 @@ from foosball_gym.training.run_dir.files import (
 from foosball_gym.training.run_dir.lock import run_lock
 from foosball_gym.training.run_dir.physics import PhysicsMismatchWarning, physics_mismatch
 from foosball_gym.training.run_dir.storage import save_model
-from foosball_gym.training.sb3.callbacks import CheckpointCallback, EvalCurveCallback, StopOnSignal
+from foosball_gym.training.sb3.callbacks import (
+    CheckpointCallback,
+    EvalCurveCallback,
+    ProgressCallback,
+    StopOnSignal,
+    rollout_steps,
+    steps_run,
+)
 from foosball_gym.training.sb3.model import build_model, load_checkpoint
 from foosball_gym.training.sb3.pretrain import pretrain
 from foosball_gym.training.sb3.teacher import TeacherCallback
@@ -107,7 +114,8 @@ def train(
     Args:
         config: the run's configuration (ignored with ``resume``: the run's own is read).
         out: the run directory.
-        progress_bar: show SB3's progress bar.
+        progress_bar: show the steps on standard error, with the last evaluation's success:
+            a bar on a terminal, a line now and then elsewhere.
         resume: continue from the last checkpoint in ``out`` (or its final model).
         callbacks: extra SB3 callbacks, run after the run's own.
         timesteps: with ``resume``, train on to this many steps in all, past the run's own
@@ -183,7 +191,7 @@ def _train(
         venv.close()
         raise
     if not continuing and config.pretrain_episodes:
-        pretrain(model, config, out)
+        pretrain(model, config, out, progress_bar)
 
     if config.pretrain_episodes and isinstance(venv, VecNormalize):
         # The clone was fitted to observations scaled by the demonstrations' statistics; left
@@ -230,13 +238,26 @@ def _train(
 
     start = time.perf_counter()
     remaining = max(config.timesteps - done_steps, 0)
+    total = steps_run(model, done_steps, remaining) if remaining else done_steps
+    if continuing:
+        print(f"continuing {out} from its checkpoint at step {done_steps:,}, to {total:,}")
+    # Rounding up by a rollout is worth a word where it is no small part of the run.
+    if total - max(config.timesteps, done_steps) > config.timesteps // 10:
+        print(
+            f"training to {total:,} steps, not {config.timesteps:,}: {type(model).__name__} "
+            f"collects {rollout_steps(model):,} steps at a time"
+        )
+    if progress_bar:
+        # After the evaluations, so that the bar shows the one just made.
+        own.append(ProgressCallback(total, evaluations))
+    # Loading a model teacher gave PyTorch one thread, as for any policy that plays.
+    th.set_num_threads(config.torch_threads)
     try:
         if remaining:
             with stop.installed():
                 model.learn(
                     remaining,
                     callback=CallbackList(own + list(callbacks or [])),
-                    progress_bar=progress_bar,
                     reset_num_timesteps=not continuing,
                     tb_log_name="run",
                 )
