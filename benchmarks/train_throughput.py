@@ -1,14 +1,23 @@
-"""Env steps per second of ``foosball train``: the run's own configuration (PPO and every
-default but the length) for an environment, its environments in this process (``dummy``) or
-one process each (``subproc``). Timed from the first rollout to the last update: learning and
-checkpoints included, as a run has them; building the run and evaluating it are not (a full
-game's evaluation is 50 matches of a minute each: more steps than 180,000 of training).
+"""Env steps per second of ``foosball train``, stage by stage, as Isaac Lab's tables give them:
 
-    python benchmarks/train_throughput.py [--env ID] [--steps N] [--n-envs N]
-                                          [--vec-env dummy subproc] [--against DIR]
+- ``env``: the run's vectorised environments (its vec_env, n_envs, normalisation and self-play
+  wrappers) stepped with random actions;
+- ``+ inference``: SB3's rollouts, the policy choosing every action, no learning;
+- ``+ training``: the whole run, from the first rollout to the last update, checkpoints
+  included (building the run and its evaluations are not timed: a full game's evaluation is
+  50 matches of a minute each, more steps than 180,000 of training).
 
-``--against DIR`` trains with the package of another checkout too (e.g. a ``git worktree`` of
-the commit before a change), in fresh processes, alternating with this one.
+Beside them, ``1 env, 1 process`` is one environment stepped alone with random actions, and
+``x cores`` that figure times the cores this process may use: what the environments alone
+could give if nothing else ran. The training row's share of it is the learner's efficiency.
+
+    python benchmarks/train_throughput.py [--env ID] [--config FILE|builtin:ID]
+                                          [--steps N] [--set KEY=VALUE ...] [--against DIR]
+
+``--config`` takes what ``foosball train --config`` takes (default: the env's defaults, as
+``foosball train ENV_ID`` runs); ``--set`` overrides a field (``--set vec_env=dummy``).
+``--against DIR`` measures the package of another checkout too (e.g. a ``git worktree`` of the
+commit before a change), in fresh processes, alternating with this one.
 """
 
 from __future__ import annotations
@@ -20,20 +29,96 @@ import subprocess
 import sys
 import tempfile
 import time
+from typing import Any
 
-VEC_ENVS = ("dummy", "subproc")
+import numpy as np
+
+STAGES = ("env", "+ inference", "+ training")
 
 
-def measure(env_id: str, steps: int, n_envs: int, vec_env: str) -> float:
-    """Env steps/s of training ``env_id`` for ``steps`` steps."""
-    from stable_baselines3.common.callbacks import BaseCallback
-
+def _config(env_id: str, config_file: str | None, overrides: dict[str, Any], steps: int) -> Any:
     from foosball_gym.training.config import TrainConfig
+
+    if config_file:
+        try:
+            from foosball_gym.training.config_file import load_train_config
+        except ImportError:  # a checkout from before settings files
+            raise SystemExit("--config needs a checkout with settings files") from None
+        config = load_train_config(config_file, env_id, {})
+    else:
+        config = TrainConfig(env_id)
+    for key, value in overrides.items():
+        setattr(config, key, type(getattr(config, key))(value))
+    config.timesteps = steps
+    config.eval_freq = steps + 1
+    config.eval_episodes = 1  # the one evaluation at the end, which is not timed
+    config.pretrain_episodes = 0
+    config.check()
+    return config
+
+
+def env_alone(env_id: str, steps: int) -> float:
+    """Env steps/s of one environment in this process, random actions, resets included."""
+    import gymnasium as gym
+
+    import foosball_gym  # noqa: F401
+
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    actions = np.random.default_rng(0).uniform(-1, 1, (steps, *env.action_space.shape))
+    actions = actions.astype(np.float32)
+    start = time.perf_counter()
+    for action in actions:
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
+    rate = steps / (time.perf_counter() - start)
+    env.close()
+    return rate
+
+
+def measure(stage: str, config: Any) -> float:
+    """Env steps/s of ``stage`` (one of :data:`STAGES`) for ``config.timesteps`` steps."""
+    import torch as th
+
+    from foosball_gym.training.sb3.vec_env import make_env
+
+    th.set_num_threads(config.torch_threads)
+    if stage == "+ training":
+        return _training(config)
+    venv = make_env(config)
+    try:
+        if stage == "env":
+            venv.reset()
+            n = venv.num_envs
+            rounds = max(config.timesteps // n, 1)
+            rng = np.random.default_rng(0)
+            shape = (rounds, n, *venv.action_space.shape)
+            actions = rng.uniform(-1, 1, shape).astype(np.float32)
+            start = time.perf_counter()
+            for action in actions:
+                venv.step(action)
+            return rounds * n / (time.perf_counter() - start)
+        from foosball_gym.training.sb3.model import build_model
+
+        model = build_model(config, venv, None)
+        _, callback = model._setup_learn(config.timesteps, None)
+        start, done = time.perf_counter(), 0
+        while done < config.timesteps:
+            model.collect_rollouts(venv, callback, model.rollout_buffer, model.n_steps)
+            done += model.n_steps * venv.num_envs
+        return done / (time.perf_counter() - start)
+    finally:
+        venv.close()
+
+
+def _training(config: Any) -> float:
+    from stable_baselines3.common.callbacks import BaseCallback
 
     try:
         from foosball_gym.training.sb3.trainer import train
     except ImportError:  # a checkout from before training/ was split by job
-        from foosball_gym.training.run import train
+        from foosball_gym.training.run import train  # type: ignore[no-redef]
 
     class Clock(BaseCallback):
         def _on_training_start(self) -> None:
@@ -45,46 +130,77 @@ def measure(env_id: str, steps: int, n_envs: int, vec_env: str) -> float:
         def _on_training_end(self) -> None:
             self.rate = (self.model.num_timesteps - self.steps) / (time.perf_counter() - self.start)
 
-    config = TrainConfig(
-        env_id, timesteps=steps, n_envs=n_envs, vec_env=vec_env, eval_freq=steps + 1
-    )
-    config.eval_episodes = 1  # the one evaluation at the end, which is not timed
     clock = Clock()
     with tempfile.TemporaryDirectory() as out:
         train(config, out, callbacks=[clock])
     return clock.rate
 
 
-def _measure_in(checkout: str, env_id: str, steps: int, n_envs: int, vec_env: str) -> float:
+def _measure_in(checkout: str, what: str, args: argparse.Namespace) -> float:
+    """``what`` (a stage, or "alone") measured in a fresh process on ``checkout``'s package."""
     code = (
         "import json, sys; sys.path.insert(0, sys.argv[1]); sys.path.insert(1, sys.argv[2]);"
-        "import train_throughput as t;"
-        "print(json.dumps(t.measure(sys.argv[3], int(sys.argv[4]), int(sys.argv[5]), sys.argv[6])))"
+        "import train_throughput as t; a = json.loads(sys.argv[3]);"
+        "r = t.env_alone(a['env'], a['steps']) if a['what'] == 'alone' else "
+        "t.measure(a['what'], t._config(a['env'], a['config'], a['set'], a['steps']));"
+        "print(json.dumps(r))"
     )
     here = os.path.dirname(os.path.abspath(__file__))
-    args = [checkout, here, env_id, str(steps), str(n_envs), vec_env]
+    spec = {
+        "what": what,
+        "env": args.env,
+        "config": args.config,
+        "set": dict(args.set),
+        "steps": args.steps if what != "alone" else min(args.steps, 20_000),
+    }
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
     out = subprocess.run(
-        [sys.executable, "-c", code, *args], capture_output=True, text=True, check=True
+        [sys.executable, "-c", code, checkout, here, json.dumps(spec)],
+        capture_output=True,
+        text=True,
+        env=env,
     )
+    if out.returncode:
+        raise SystemExit(f"{checkout}: {what} failed:\n{out.stderr[-3000:]}")
     return float(json.loads(out.stdout.strip().splitlines()[-1]))
+
+
+def _key_value(text: str) -> tuple[str, str]:
+    key, sep, value = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    return key, value
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--env", default="Foosball-FullGame-v0", help="environment id")
-    parser.add_argument("--steps", type=int, default=65536, help="env steps per run")
-    parser.add_argument("--n-envs", type=int, default=8, help="environments (8, the default)")
-    parser.add_argument("--vec-env", nargs="*", choices=VEC_ENVS, default=list(VEC_ENVS))
+    parser.add_argument("--env", default="Foosball-Block-v0", help="environment id")
+    parser.add_argument("--config", help="a settings file, as foosball train --config takes")
+    parser.add_argument("--steps", type=int, default=65536, help="env steps per measurement")
+    parser.add_argument("--set", type=_key_value, action="append", default=[], metavar="K=V")
     parser.add_argument("--against", metavar="DIR", help="another checkout to compare with")
     args = parser.parse_args()
     this = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     checkouts = [("this", this)] + ([("against", args.against)] if args.against else [])
-    print(f"{args.env}, {args.steps} steps, {args.n_envs} environments, {os.cpu_count()} CPUs")
-    print(f"{'checkout':>9s} {'vec_env':>8s} {'env steps/s':>12s}")
-    for vec_env in args.vec_env:
+    cores = _cores()
+    print(f"{args.env}, {args.config or 'the defaults'}, {args.steps} steps, {cores} cores")
+    print(f"{'checkout':>9s} {'stage':>18s} {'env steps/s':>12s} {'of x cores':>11s}")
+    alone = {name: _measure_in(checkout, "alone", args) for name, checkout in checkouts[::-1]}
+    for name, _ in checkouts[::-1]:
+        print(f"{name:>9s} {'1 env, 1 process':>18s} {alone[name]:12,.0f}")
+        print(f"{name:>9s} {f'x {cores} cores':>18s} {alone[name] * cores:12,.0f} {'100 %':>11s}")
+    for stage in STAGES:
         for name, checkout in checkouts[::-1]:
-            rate = _measure_in(checkout, args.env, args.steps, args.n_envs, vec_env)
-            print(f"{name:>9s} {vec_env:>8s} {rate:12,.0f}")
+            rate = _measure_in(checkout, stage, args)
+            share = f"{100 * rate / (alone[name] * cores):.0f} %"
+            print(f"{name:>9s} {stage:>18s} {rate:12,.0f} {share:>11s}", flush=True)
 
 
 if __name__ == "__main__":

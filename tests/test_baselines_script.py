@@ -1,0 +1,86 @@
+"""scripts/baselines.py: a recipe trained over seeds, its checkpoints at the budgets evaluated on
+the reserved seeds, one CSV row each, and the table's interquartile mean with its interval."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def baselines():
+    spec = importlib.util.spec_from_file_location("baselines", ROOT / "scripts" / "baselines.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["baselines"] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+RECIPE = """\
+env_id: Foosball-Block-v0
+n_envs: 2
+vec_env: dummy
+n_steps: 64
+batch_size: 64
+n_epochs: 1
+timesteps: 256
+checkpoint_freq: 128
+eval_freq: 128
+eval_episodes: 1
+"""
+
+
+def test_train_writes_a_row_per_seed_and_budget_that_its_commands_reproduce(
+    baselines, tmp_path: Path
+) -> None:
+    recipe = tmp_path / "tiny.yaml"
+    recipe.write_text(RECIPE)
+    tasks = {"tiny": baselines.Task("Foosball-Block-v0", str(recipe), (128, 256))}
+    args = argparse.Namespace(
+        csv=tmp_path / "baselines.csv",
+        task=["tiny"],
+        seeds=[3],
+        runs=tmp_path / "runs",
+        episodes=3,
+    )
+    baselines.train(args, tasks)
+    with open(args.csv, newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["seed"], r["env_steps"]) for r in rows] == [("3", "128"), ("3", "256")]
+    for row in rows:
+        assert row.keys() >= {"env_id", "options", "algorithm", "config", "seed", "env_steps",
+                              "wall_seconds", "success", "eval_seed", "eval_episodes"}  # fmt: skip
+        assert row["eval_seed"] == str(baselines.EVAL_SEED)
+        assert row["eval_episodes"] == "3"
+        assert row["algorithm"] == "ppo" and json.loads(row["options"]) == {}
+        assert 0 <= float(row["success"]) <= 1
+        assert float(row["wall_seconds"]) > 0
+    # The budget's model is the checkpoint there; the last budget is the run's own end.
+    run = baselines.run_dir(args.runs, "tiny", 3)
+    assert baselines.budget_model(run, 128).name == "model_0000000128.zip"
+    assert baselines.budget_model(run, 256).name in ("model_0000000256.zip", "model.zip")
+    # A second call trains nothing more: the CSV already has that seed.
+    mtime = args.csv.stat().st_mtime_ns
+    baselines.train(args, tasks)
+    assert args.csv.stat().st_mtime_ns == mtime
+
+
+def test_the_table_gives_the_interquartile_mean_over_seeds_with_an_interval(baselines) -> None:
+    rows = [
+        {"task": "block", "env_steps": "300000", "success": str(s), "wall_seconds": str(w)}
+        for s, w in [(0.98, 60), (0.99, 62), (1.0, 58), (0.5, 70), (0.99, 61)]
+    ]
+    cell = baselines.aggregate(rows, reps=500)[("block", 300000)]
+    assert cell["seeds"] == 5
+    # The interquartile mean leaves out the worst and the best seed: (0.98 + 0.99 + 0.99) / 3.
+    assert cell["iqm"] == pytest.approx((0.98 + 0.99 + 0.99) / 3)
+    assert cell["low"] <= cell["iqm"] <= cell["high"]
+    assert cell["min"] == 0.5 and cell["median"] == 0.99 and cell["wall_median"] == 61
