@@ -7,6 +7,8 @@ import json
 import os
 import re
 import signal
+import subprocess
+import sys
 import time
 
 import cv2
@@ -257,6 +259,106 @@ def test_playing_a_real_table_without_a_calibrated_camera_is_refused(tmp_path, c
         main(["play", "scripted", "--env", "Foosball-Block-v0", "--table", str(path)])
     assert exit_info.value.code == 2
     assert "calibrate" in capsys.readouterr().err
+
+
+def _bad_table_file(tmp_path):
+    path = tmp_path / "table.yaml"
+    path.write_text("joints: [\n")
+    return path
+
+
+def _table_whose_bus_does_not_open(tmp_path):
+    """A calibrated table file whose camera opens (a video file) and whose CAN bus does not."""
+    from foosball_gym.camera import CameraModel
+    from foosball_gym.hardware.config import BusConfig
+
+    video = str(tmp_path / "camera.avi")
+    writer = cv2.VideoWriter(video, cv2.VideoWriter_fourcc(*"MJPG"), 30, (160, 90))
+    for _ in range(5):
+        writer.write(np.zeros((90, 160, 3), np.uint8))
+    writer.release()
+    config = load_config(shipped_table("keeper"))
+    config.camera["calibration"] = CameraCalibration.from_camera_model(
+        CameraModel(160, 90)
+    ).to_dict()
+    config.camera["source"] = video
+    config.bus = BusConfig(interface="socketcan", channel="nocan9")
+    path = tmp_path / "table.yaml"
+    save_config(config, path)
+    return path
+
+
+def _bad_model(tmp_path):
+    path = tmp_path / "model.zip"
+    path.write_bytes(b"not a zip")
+    return path
+
+
+SIM = ["--table", "sim", "--episodes", "1", "--camera", "160x90"]
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        "a log path that is a folder",
+        "a log that cannot be created",
+        "a table file that does not load",
+        "a table whose bus does not open",
+        "a model that does not load",
+    ],
+)
+def test_play_with_a_bad_input_exits_with_its_line_and_leaves_no_process_behind(tmp_path, case):
+    """Every error ends what the command started (the simulated table's camera process, a
+    camera, drives): a log it could not open once left the camera process running, and the
+    command waiting on it for ever."""
+    if case == "a log that cannot be created" and not os.path.isdir("/proc/self"):
+        pytest.skip("needs /proc, which refuses new files")
+    scripted = ["scripted", "--env", "Foosball-Block-v0"]
+    argv = {
+        # Real time: the table starts its camera process before the log is opened.
+        "a log path that is a folder": [*scripted, *SIM, "--log", str(tmp_path)],
+        "a log that cannot be created": [*scripted, *SIM, "--log", "/proc/x.jsonl"],
+        "a table file that does not load": [*scripted, "--table", str(_bad_table_file(tmp_path))],
+        "a table whose bus does not open": [
+            *scripted,
+            "--table",
+            str(_table_whose_bus_does_not_open(tmp_path)),
+        ],
+        "a model that does not load": [
+            str(_bad_model(tmp_path)),
+            "--env",
+            "Foosball-Block-v0",
+            *SIM,
+        ],
+    }[case]
+    # A session of its own: whatever the command leaves running is found by its group.
+    play = subprocess.Popen(
+        [sys.executable, "-m", "foosball_gym.cli", "play", *argv, "--no-status"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        _, err = play.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        os.killpg(play.pid, signal.SIGKILL)
+        play.communicate()
+        pytest.fail(f"foosball play with {case} ran on for 60 s")
+    lines = err.strip().splitlines()
+    assert play.returncode == 2 and len(lines) == 1, err
+    assert lines[0].startswith("foosball play: error: "), err
+    left = True
+    for _ in range(50):  # a process just ended may take a moment to be reaped
+        try:
+            os.killpg(play.pid, 0)
+        except ProcessLookupError:
+            left = False
+            break
+        time.sleep(0.1)
+    if left:
+        os.killpg(play.pid, signal.SIGKILL)
+    assert not left, f"foosball play with {case} left a process behind"
 
 
 def test_the_shipped_table_configuration_loads():
