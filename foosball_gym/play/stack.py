@@ -441,15 +441,18 @@ READY_STEPS = 120
 
 class _TableCamera:
     """The simulated table's camera as a frame source: frames stamped with the table time of
-    the scene they show."""
+    the scene they show, which numbers them too (a still scene renders the same pixels, and
+    is no frozen camera)."""
 
     def __init__(self, table: Any) -> None:
         self.table = table
+        self.frame_number: float | None = None
 
     def read(self) -> tuple[float, np.ndarray | None]:
         t, frame = self.table.read()
         if frame is None:
             return t, None
+        self.frame_number = t
         return t, np.ascontiguousarray(frame[:, :, ::-1])  # RGB to the BGR of OpenCV sources
 
     def close(self) -> None:
