@@ -252,6 +252,107 @@ def test_calibrate_writes_the_camera_pose_into_the_table_configuration(tmp_path,
     assert "camera calibrated" in capsys.readouterr().out
 
 
+def _table_with_intrinsics(tmp_path):
+    """A table file with the simulated camera's intrinsics, and a picture of the field."""
+    interface = task_interface("Foosball-Block-v0")
+    table = SimulatedTable("Foosball-Block-v0", {}, virtual_table_config(interface))
+    try:
+        frame = cv2.cvtColor(table.frame(), cv2.COLOR_RGB2BGR)
+        truth = CameraCalibration.from_camera_model(table.camera_model)
+    finally:
+        table.close()
+    config = load_config(shipped_table("keeper"))
+    config.camera["K"] = truth.K.tolist()
+    path = tmp_path / "table.yaml"
+    save_config(config, path)
+    return path, frame
+
+
+GREEN = (60, 160, 60)
+
+
+def _all_green(frame):
+    return np.full_like(frame, GREEN)
+
+
+def _green_square(frame):
+    out = np.full_like(frame, 128)
+    h, w = frame.shape[:2]
+    out[h // 4 : h // 4 + h // 2, w // 2 - h // 4 : w // 2 + h // 4] = GREEN
+    return out
+
+
+def _field_squeezed(frame):
+    """The field's picture squeezed to two thirds of its width: a field of the wrong shape."""
+    h, w = frame.shape[:2]
+    out = np.full_like(frame, 128)
+    narrow = cv2.resize(frame, (2 * w // 3, h))
+    out[:, w // 6 : w // 6 + narrow.shape[1]] = narrow
+    return out
+
+
+@pytest.mark.parametrize(
+    ("picture", "why"),
+    [
+        (_all_green, "reaches the picture's edge"),
+        (_green_square, "no field of 1.2 x 0.68 m"),
+        (_field_squeezed, "no field of 1.2 x 0.68 m"),
+    ],
+)
+def test_calibrate_refuses_a_picture_that_is_no_table_and_writes_nothing(
+    tmp_path, capsys, picture, why
+):
+    path, frame = _table_with_intrinsics(tmp_path)
+    before = path.read_bytes()
+    image = tmp_path / "field.png"
+    cv2.imwrite(str(image), picture(frame))
+    with pytest.raises(SystemExit) as exit_info:
+        main(["calibrate", "--table", str(path), "--frame", str(image)])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and why in err and "left as it was" in err, err
+    assert path.read_bytes() == before
+
+
+def test_calibrate_refuses_a_picture_over_its_pixel_budget_before_decoding_it(
+    tmp_path, capsys, monkeypatch
+):
+    """A PNG whose header says 40,000 x 30,000 pixels (1.2 gigapixels) is refused from the
+    header: a file of a megabyte can decode to gigabytes."""
+    import struct
+    import zlib
+
+    path, _ = _table_with_intrinsics(tmp_path)
+    before = path.read_bytes()
+    header = struct.pack(">IIBBBBB", 40_000, 30_000, 8, 2, 0, 0, 0)
+    chunk = b"IHDR" + header
+    image = tmp_path / "huge.png"
+    image.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + struct.pack(">I", len(header))
+        + chunk
+        + struct.pack(">I", zlib.crc32(chunk))
+    )
+    decoded: list[str] = []
+    monkeypatch.setattr(cv2, "imread", lambda *a, **k: decoded.append(a[0]))
+    with pytest.raises(SystemExit) as exit_info:
+        main(["calibrate", "--table", str(path), "--frame", str(image)])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert "40000 x 30000 pixels (1200 megapixels)" in err and err.count("\n") == 0, err
+    assert decoded == []
+    assert path.read_bytes() == before
+
+
+@pytest.mark.parametrize("suffix", [".png", ".jpg", ".bmp"])
+def test_a_pictures_size_is_read_from_its_header(tmp_path, suffix):
+    from foosball_gym.vision.calibration import image_size
+
+    image = tmp_path / f"picture{suffix}"
+    cv2.imwrite(str(image), np.zeros((45, 123, 3), np.uint8))
+    assert image_size(image) == (123, 45)
+
+
 def test_playing_a_real_table_without_a_calibrated_camera_is_refused(tmp_path, capsys):
     path = tmp_path / "table.yaml"
     save_config(load_config(shipped_table("keeper")), path)
