@@ -201,6 +201,12 @@ def test_the_shipped_policies_statistics_pass_the_checks():
         ("[]", "JSON list, not a run's configuration", "JSON list, not the object"),
         ('"x"', "JSON str, not a run's configuration", "JSON str, not the object"),
         ('{"env_id": ', "not valid JSON", "not valid JSON"),
+        ("[" * 100_000 + "]" * 100_000, "nested too deep", "nested too deep"),
+        (
+            '{"env_id": "Foosball-Block-v0", "seed": ' + "7" * 5000 + "}",
+            "4300 digits",
+            "5000 digits",
+        ),
         ({"env_kwargs": []}, "env_kwargs must be an object", "env_kwargs must be an object"),
         ({"env_kwargs": None}, "env_kwargs must be an object", "env_kwargs must be an object"),
         ({"env_kwargs": {"residual": "big"}}, "residual must be a number", "residual must be"),

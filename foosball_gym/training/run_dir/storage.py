@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from foosball_gym import user_json
 from foosball_gym.training.run_dir.files import (
     LEGACY_NORM_FILE,
     MODEL_FILE,
@@ -142,8 +143,8 @@ class NormStats:
     def load(cls, path: Path) -> NormStats:
         """Read statistics :meth:`save` wrote; ValueError naming what is wrong otherwise."""
         try:
-            data = json.loads(Path(path).read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as err:
+            data = user_json.loads(Path(path).read_text(encoding="utf-8"))
+        except ValueError as err:
             raise ValueError(f"{path} is not valid JSON: {err}") from None
         return cls.from_dict(data, str(path))
 
