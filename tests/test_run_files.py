@@ -249,6 +249,11 @@ def test_a_damaged_curve_or_best_record_is_refused_in_one_line(run, capsys):
     best.unlink()
     (run / "eval.csv").write_text("timesteps,wall_seconds\n128,x\n")
     assert "eval.csv, line 2" in refused(argv, capsys)
+    # A row no cut could keep or count lost: once dropped without a word.
+    (run / "eval.csv").write_text("timesteps,wall_seconds\n128,1.0\nnan,2.0\n")
+    assert "eval.csv, line 3: its timesteps is nan, not a finite number" in refused(argv, capsys)
+    (run / "eval.csv").write_bytes(b"timesteps,wall_seconds\n128,\xff\xfe\n")
+    assert f"{run / 'eval.csv'} is not an evaluation curve: not UTF-8" in refused(argv, capsys)
 
 
 @pytest.fixture(scope="module")
