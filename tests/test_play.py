@@ -94,6 +94,21 @@ def test_the_cli_plays_the_simulated_table_in_real_time_by_default(monkeypatch, 
     assert re.search(r"loop period median [\d.]+ ms, p99 [\d.]+ ms; late \d+ of \d+ loops", out)
 
 
+def test_play_takes_its_latency_in_milliseconds(monkeypatch, capsys):
+    from foosball_gym.play import stack
+
+    chosen: dict = {}
+
+    def recording_play_sim(*args, **kwargs):
+        chosen.update(kwargs)
+        return stack.PlayReport()
+
+    monkeypatch.setattr(stack, "play_sim", recording_play_sim)
+    argv = ["play", "scripted", "--env", "Foosball-Block-v0", "--table", "sim"]
+    assert main([*argv, "--latency", "100", "--no-status"]) == 0
+    assert chosen["latency_s"] == pytest.approx(0.1)
+
+
 def test_a_clock_for_a_real_table_is_refused(capsys):
     with pytest.raises(SystemExit):
         main(["play", "scripted", "--env", "Foosball-Block-v0", "--table", "x.yaml", "--lockstep"])
