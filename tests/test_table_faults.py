@@ -424,6 +424,42 @@ def test_play_real_stops_a_table_whose_camera_gives_its_last_picture_under_new_t
         assert drive.state == OFF
 
 
+def test_a_killed_camera_process_stops_the_table_with_one_error_and_no_traceback(
+    monkeypatch, tables_seen, capfd
+):
+    """``play_sim`` in real time, its camera process killed: the table's clock thread and the
+    loop both meet the closed pipe; the loop's read ends the session with an OSError that says
+    so (one line from ``foosball play``), and the drives brake and switch off."""
+    tables: list = []
+    real_init = simulated_table.SimulatedTable.__init__
+
+    def init(self, *args, **kwargs):
+        real_init(self, *args, **kwargs)
+        tables.append(self)
+
+    monkeypatch.setattr(simulated_table.SimulatedTable, "__init__", init)
+    calls = itertools.count()
+    swing_policy = swinging()
+
+    def policy(obs):
+        if next(calls) == 40:
+            process = tables[0]._camera._process
+            os.kill(process.pid, signal.SIGKILL)
+            process.join(timeout=10)
+        return swing_policy(obs)
+
+    # An OSError: foosball play's one line.
+    with pytest.raises(OSError, match="camera process was killed by SIGKILL"):
+        play_sim(
+            policy, "Foosball-Block-v0", {}, episodes=5, camera_size=SMALL_CAMERA, realtime=True
+        )
+    assert "Traceback" not in capfd.readouterr().err
+    (drives,) = tables_seen
+    for events, state, _ in drives.values():
+        assert_braked_then_off(events, QUICK_STOP, first_quick_stop(events) - 1e-9)
+        assert state == OFF
+
+
 # ---------------------------------------------------------------------------- a hung master
 
 
