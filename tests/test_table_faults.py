@@ -375,6 +375,39 @@ def test_a_still_table_seen_by_the_simulated_camera_is_no_frozen_camera():
     assert report.steps == gym.spec("Foosball-Score-v0").max_episode_steps
 
 
+def test_a_video_file_of_a_still_scene_is_no_frozen_camera(tmp_path):
+    """A video's frames are numbered by their place in the file: ten alike (a still scene)
+    are ten new pictures for the watchdog, where a camera's ten alike would be one."""
+    import cv2
+
+    from foosball_gym.play.loop import PlayLoop
+    from foosball_gym.vision import OpenCVSource
+
+    path = str(tmp_path / "still.avi")
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), 60, (160, 90))
+    for _ in range(10):
+        writer.write(np.full((90, 160, 3), 90, np.uint8))
+    writer.release()
+
+    class Drives:
+        fed: list[float] = []
+
+        def feed_state(self, now):
+            self.fed.append(now)
+
+        def command(self, targets, now):
+            return targets
+
+    source = OpenCVSource(path)
+    drives = Drives()
+    interface = task_interface("Foosball-Block-v0", {})
+    loop = PlayLoop(lambda obs: obs, interface, drives, source, None, None, None)
+    for _ in range(10):
+        loop.hold({})
+    source.close()
+    assert len(drives.fed) == 10
+
+
 def test_play_real_stops_a_table_whose_camera_gives_its_last_picture_under_new_time_stamps(
     monkeypatch, realtime_table
 ):

@@ -60,12 +60,17 @@ class OpenCVSource:
         self._is_file = isinstance(self.source, str)
         self._fps = self._cap.get(cv2.CAP_PROP_FPS) or 60.0
         self._frames = 0
+        # A file's frames are numbered by their place in it (a still scene's are alike); a
+        # camera through OpenCV gives no count of its own.
+        self.frame_number: int | None = None
 
     def read(self) -> tuple[float, np.ndarray] | None:
         ok, frame = self._cap.read()
         if not ok:
             return None
         self._frames += 1
+        if self._is_file:
+            self.frame_number = self._frames
         # A file's frames are timed by its frame rate; a camera's by when they arrive.
         t = self._frames / self._fps if self._is_file else time.monotonic()
         return t, frame
