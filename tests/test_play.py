@@ -383,7 +383,7 @@ def _bad_table_file(tmp_path):
     return path
 
 
-def _table_whose_bus_does_not_open(tmp_path):
+def _table_whose_bus_does_not_open(tmp_path, interface="socketcan", channel="nocan9"):
     """A calibrated table file whose camera opens (a video file) and whose CAN bus does not."""
     from foosball_gym.camera import CameraModel
     from foosball_gym.hardware.config import BusConfig
@@ -398,7 +398,7 @@ def _table_whose_bus_does_not_open(tmp_path):
         CameraModel(160, 90)
     ).to_dict()
     config.camera["source"] = video
-    config.bus = BusConfig(interface="socketcan", channel="nocan9")
+    config.bus = BusConfig(interface=interface, channel=channel)
     path = tmp_path / "table.yaml"
     save_config(config, path)
     return path
@@ -420,6 +420,7 @@ SIM = ["--table", "sim", "--episodes", "1", "--camera", "160x90"]
         "a log that cannot be created",
         "a table file that does not load",
         "a table whose bus does not open",
+        "a table whose bus's driver is missing",
         "a model that does not load",
     ],
 )
@@ -430,23 +431,36 @@ def test_play_with_a_bad_input_exits_with_its_line_and_leaves_no_process_behind(
     if case == "a log that cannot be created" and not os.path.isdir("/proc/self"):
         pytest.skip("needs /proc, which refuses new files")
     scripted = ["scripted", "--env", "Foosball-Block-v0"]
-    argv = {
+    # Only the case's own files are made: each table file is table.yaml.
+    make = {
         # Real time: the table starts its camera process before the log is opened.
-        "a log path that is a folder": [*scripted, *SIM, "--log", str(tmp_path)],
-        "a log that cannot be created": [*scripted, *SIM, "--log", "/proc/x.jsonl"],
-        "a table file that does not load": [*scripted, "--table", str(_bad_table_file(tmp_path))],
-        "a table whose bus does not open": [
+        "a log path that is a folder": lambda: [*scripted, *SIM, "--log", str(tmp_path)],
+        "a log that cannot be created": lambda: [*scripted, *SIM, "--log", "/proc/x.jsonl"],
+        "a table file that does not load": lambda: [
+            *scripted,
+            "--table",
+            str(_bad_table_file(tmp_path)),
+        ],
+        "a table whose bus does not open": lambda: [
             *scripted,
             "--table",
             str(_table_whose_bus_does_not_open(tmp_path)),
         ],
-        "a model that does not load": [
+        # python-can's slcan wants pyserial, which the hardware extra does not install (with
+        # it, the missing device is the error).
+        "a table whose bus's driver is missing": lambda: [
+            *scripted,
+            "--table",
+            str(_table_whose_bus_does_not_open(tmp_path, "slcan", "/dev/no-such-adapter")),
+        ],
+        "a model that does not load": lambda: [
             str(_bad_model(tmp_path)),
             "--env",
             "Foosball-Block-v0",
             *SIM,
         ],
-    }[case]
+    }
+    argv = make[case]()
     # A session of its own: whatever the command leaves running is found by its group.
     play = subprocess.Popen(
         [sys.executable, "-m", "foosball_gym.cli", "play", *argv, "--no-status"],
@@ -462,6 +476,9 @@ def test_play_with_a_bad_input_exits_with_its_line_and_leaves_no_process_behind(
         play.communicate()
         pytest.fail(f"foosball play with {case} ran on for 60 s")
     lines = err.strip().splitlines()
+    if case == "a table whose bus's driver is missing":
+        # python-can logs the module it misses as it loads the interface, before the error.
+        lines = [line for line in lines if "You won't be able to use" not in line]
     assert play.returncode == 2 and len(lines) == 1, err
     assert lines[0].startswith("foosball play: error: "), err
     left = True
