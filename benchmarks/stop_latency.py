@@ -13,6 +13,9 @@ halted). The keeper table's configuration: watchdog_s 50 ms, heartbeat_timeout_s
   last new picture (the loop goes on commanding meanwhile).
 - frozen camera, play_sim: ``play_sim`` in real time, its camera process stopped (SIGSTOP);
   from the last picture, on the simulated table's watchdog (100 ms).
+- frozen picture, play_sim: ``play_sim`` in real time, its camera giving its last picture
+  again under fresh time stamps and no frame number, as a stalled USB camera does through
+  ``OpenCVSource``; from the last new picture, on the simulated table's watchdog (100 ms).
 - killed master: the master in a process of its own (the drives here, on a UDP multicast
   bus), sent SIGKILL, SIGSTOP or SIGTERM (which it handles, as ``foosball play`` does); from
   the signal.
@@ -293,6 +296,62 @@ def frozen_camera_play_sim(seed: int) -> Times:
     return stop_times(tables[0].drives.drives, fed[-1])
 
 
+def frozen_picture_play_sim(seed: int) -> Times:
+    """``play_sim`` in real time; 40 loops in, the camera gives its last picture again."""
+    from foosball_gym.play import stack
+    from foosball_gym.virtual_table import simulated_table
+
+    tables: list = []
+    fed: list[float] = []
+    real_init = simulated_table.SimulatedTable.__init__
+    real_feed = TableDrives.feed_state
+    real_camera = stack._TableCamera
+
+    def init(self, *args, **kwargs):
+        real_init(self, *args, **kwargs)
+        tables.append(self)
+
+    def feed(self, now):
+        fed.append(self.guard.clock())
+        real_feed(self, now)
+
+    class StalledCamera(real_camera):  # type: ignore[misc, valid-type]
+        reads = 0
+        last = None
+
+        def read(self):
+            StalledCamera.reads += 1
+            if StalledCamera.reads <= 40 or StalledCamera.last is None:
+                t, picture = super().read()
+                if picture is not None:
+                    StalledCamera.last = picture
+                self.frame_number = None  # as a camera that does not count its frames
+                return t, picture
+            return self.table.clock(), StalledCamera.last.copy()
+
+    calls = itertools.count()
+
+    def policy(obs):
+        k = next(calls)
+        return np.array([1.0 if (k // 6) % 2 == 0 else -1.0])
+
+    simulated_table.SimulatedTable.__init__ = init  # type: ignore[method-assign]
+    TableDrives.feed_state = feed  # type: ignore[method-assign]
+    stack._TableCamera = StalledCamera  # type: ignore[misc]
+    frozen: list[bool] = []
+    try:
+        stack.play_sim(policy, "Foosball-Block-v0", {}, episodes=3, seed=seed, realtime=True)
+    except SafetyError as e:
+        frozen.append("last picture again" in str(e))
+    finally:
+        simulated_table.SimulatedTable.__init__ = real_init  # type: ignore[method-assign]
+        TableDrives.feed_state = real_feed  # type: ignore[method-assign]
+        stack._TableCamera = real_camera  # type: ignore[misc]
+    if frozen != [True]:
+        raise TrialLost("the session stopped before the camera froze")
+    return stop_times(tables[0].drives.drives, fed[-1])
+
+
 MASTER = textwrap.dedent(
     """
     import sys, time
@@ -414,6 +473,7 @@ CASES: dict[str, Callable[[int], Times]] = {
     "master threads gone": lambda k: fresh_table(master_threads_gone)(),
     "frozen camera, play_real": lambda k: fresh_table(frozen_camera_play_real)(),
     "frozen camera, play_sim": frozen_camera_play_sim,
+    "frozen picture, play_sim": frozen_picture_play_sim,
     "killed master, SIGKILL": lambda k: killed_master(signal.SIGKILL),
     "killed master, SIGSTOP": lambda k: killed_master(signal.SIGSTOP),
     "killed master, SIGTERM": lambda k: killed_master(signal.SIGTERM),

@@ -59,15 +59,17 @@ def run(args: argparse.Namespace) -> int:
         ) from None
     from foosball_gym.hardware.config import ConfigError, load_config, save_config
     from foosball_gym.vision import OpenCVSource
+    from foosball_gym.vision.calibration import read_image
 
     try:
         config = load_config(args.table)
     except (ConfigError, OSError) as err:
         raise CliError(str(err)) from None
     if args.frame:
-        frame = cv2.imread(args.frame)
-        if frame is None:
-            raise CliError(f"cannot read an image from {args.frame}")
+        try:
+            frame = read_image(args.frame)
+        except (ValueError, OSError) as err:
+            raise CliError(f"--frame {err}") from None
     else:
         camera = config.camera
         try:
@@ -83,14 +85,18 @@ def run(args: argparse.Namespace) -> int:
         frame = got[1]
     chessboard = None
     if args.chessboard:
-        images = [cv2.imread(p) for p in sorted(glob.glob(args.chessboard))]
-        chessboard = [img for img in images if img is not None]
+        try:
+            chessboard = [read_image(p) for p in sorted(glob.glob(args.chessboard))]
+        except (ValueError, OSError) as err:
+            raise CliError(f"--chessboard {err}") from None
     try:
         summary = calibrate_table(
             config, frame, chessboard, **given(args, "pattern", "square", "home_side")
         )
-    except ValueError as err:
-        raise CliError(str(err)) from None
+    except (ValueError, cv2.error) as err:
+        # OpenCV's messages run over several lines.
+        why = " ".join(str(err).split())
+        raise CliError(f"not calibrated, {args.table} left as it was: {why}") from None
     save_config(config, args.table)
     print(f"camera calibrated: {summary}; saved to {args.table}")
     return 0

@@ -382,6 +382,16 @@ def load_model(spec: str, trust: bool = False) -> Any:
         loaded = load_policy(spec, trust=trust)
     except ModelLoadError as err:
         raise CliError(str(err)) from None
+    except RecursionError:
+        raise CliError(f"{spec} cannot be loaded: a JSON file of it is nested too deep") from None
+    except ValueError as err:
+        # Python's own bound on integers (a 5,000-digit one in a run's config.json).
+        if "integer string conversion" not in str(err):
+            raise
+        raise CliError(
+            f"{spec} cannot be loaded: a JSON file of it holds an integer of more than "
+            f"{sys.get_int_max_str_digits()} digits"
+        ) from None
     if loaded.note:
         print(loaded.note)
     return loaded

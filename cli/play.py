@@ -19,13 +19,16 @@ from .common import (
     positive_int,
     positive_number,
     scripted,
-    seconds,
     seed,
     show_size,
     size,
 )
 
 PLAY_SIM = "foosball_gym.play.stack:play_sim"
+# A camera's frame takes a few milliseconds to be read out at the least, and one that comes
+# half a second late shows a ball long gone; below 1 ms, a number meant in seconds is likelier.
+MIN_LATENCY_MS = 1.0
+MAX_LATENCY_MS = 500.0
 # As foosball_gym.sysid.excitation names them (which imports numpy: not at --help).
 SERVE_PATTERNS = ("task", "calibration")
 
@@ -80,9 +83,10 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument(
         "--latency",
-        type=seconds,
-        help="how far ahead the filter predicts, s "
-        "(default: the table's estimation.latency_s, else 0.03)",
+        type=latency_ms,
+        metavar="MS",
+        help=f"how far ahead the filter predicts, in milliseconds: 0, or {MIN_LATENCY_MS:g} to "
+        f"{MAX_LATENCY_MS:g} (default: the table's estimation.latency_s, else 30 ms)",
     )
     p.add_argument(
         "--seed",
@@ -159,6 +163,24 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument("--no-status", action="store_true", help="no live status line")
     p.set_defaults(func=run)
+
+
+def latency_ms(text: str) -> float:
+    """``--latency``: milliseconds, 0 or within :data:`MIN_LATENCY_MS`-:data:`MAX_LATENCY_MS`;
+    returns seconds."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected milliseconds, got {text!r}") from None
+    allowed = f"0, or {MIN_LATENCY_MS:g} to {MAX_LATENCY_MS:g} ms"
+    if 0 < value < MIN_LATENCY_MS:
+        raise argparse.ArgumentTypeError(
+            f"is in milliseconds ({allowed}); {text} ms is {1e3 * value:g} µs: "
+            f"did you mean {1e3 * value:g}?"
+        )
+    if not (value == 0 or MIN_LATENCY_MS <= value <= MAX_LATENCY_MS):
+        raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}")
+    return value / 1e3
 
 
 def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:

@@ -71,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
         _require("yaml", "--config", "sysid")
     if args.plot is not None:
         _require("matplotlib", "--plot", "train")
+        _check_plot_format(args.plot)
     from foosball_gym.sysid import LogError, read_logs
 
     try:
@@ -120,3 +121,17 @@ def _require(module: str, option: str, extra: str) -> None:
         importlib.import_module(module)
     except ImportError:
         raise ImportError(f'{option} needs {module}: pip install "foosball_gym[{extra}]"') from None
+
+
+def _check_plot_format(path: str) -> None:
+    """Refuse a --plot file matplotlib cannot write, before the fit rather than after it."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in formats:
+        has = f"not .{suffix}" if suffix else "and it has none"
+        raise CliError(
+            f"--plot {path}: the picture's suffix must be one of "
+            f"{', '.join('.' + f for f in sorted(formats))}, {has}"
+        )

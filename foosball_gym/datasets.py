@@ -42,6 +42,10 @@ def require_datasets_extra() -> None:
         )
 
 
+#: The longest part of a dataset id: a folder's name, well within a file system's 255 bytes.
+MAX_ID_PART = 200
+
+
 def check_dataset_id(dataset_id: str) -> None:
     """Raise ValueError where ``dataset_id`` is not of Minari's form ``NAMESPACE/NAME-vN`` (the
     namespace optional, and made of one or more folders)."""
@@ -52,6 +56,13 @@ def check_dataset_id(dataset_id: str) -> None:
         raise ValueError(
             "a dataset id is NAMESPACE/NAME-vN: letters, digits, - and _, a namespace of two "
             f"characters or more (e.g. foosball/block/scripted-v0), got {dataset_id!r}"
+        )
+    # Each part is a folder's name, which a file system keeps to 255 bytes.
+    longest = max(dataset_id.split("/"), key=len)
+    if len(longest) > MAX_ID_PART:
+        raise ValueError(
+            f"each part of a dataset id (between the /) is a folder's name, of at most "
+            f"{MAX_ID_PART} characters; {longest[:20]}... has {len(longest)}"
         )
 
 

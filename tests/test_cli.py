@@ -191,7 +191,26 @@ def config_of(parser, argv):
                 "--latency",
                 "nan",
             ],
-            "argument --latency: must be a finite number, 0 or more, got 'nan'",
+            "argument --latency: must be 0, or 1 to 500 ms, got 'nan'",
+        ),
+        (
+            ["play", "scripted", "--env", "Foosball-Block-v0", "--table", "sim", "--latency", "100"]
+            + ["--latency", "5000"],
+            "argument --latency: must be 0, or 1 to 500 ms, got '5000'",
+        ),
+        (
+            [
+                "play",
+                "scripted",
+                "--env",
+                "Foosball-Block-v0",
+                "--table",
+                "sim",
+                "--latency",
+                "0.03",
+            ],
+            "argument --latency: is in milliseconds (0, or 1 to 500 ms); 0.03 ms is 30 µs: "
+            "did you mean 30?",
         ),
         (
             ["train", "Foosball-Block-v0", "--learning-rate", "-1"],

@@ -188,6 +188,10 @@ def test_a_folder_that_is_not_a_dataset_is_never_replaced(datasets, capsys):
             ["--policy", "scripted", BLOCK, "--dataset-id", "block-scripted"],
             "a dataset id is NAMESPACE/NAME-vN",
         ),
+        (
+            ["--policy", "scripted", BLOCK, "--dataset-id", "foosball/" + "b" * 300 + "-v0"],
+            "of at most 200 characters; bbbbbbbbbbbbbbbbbbbb... has 303",
+        ),
         (["--policy", "scripted", BLOCK], "the following arguments are required: --dataset-id"),
         (
             ["--policy", "scripted", BLOCK, "--dataset-id", "ab/c-v0", "--env-kwarg", "warp=3"],

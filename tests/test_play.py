@@ -7,6 +7,8 @@ import json
 import os
 import re
 import signal
+import subprocess
+import sys
 import time
 
 import cv2
@@ -90,6 +92,21 @@ def test_the_cli_plays_the_simulated_table_in_real_time_by_default(monkeypatch, 
     out = capsys.readouterr().out
     assert "1 episodes of Foosball-Block-v0" in out
     assert re.search(r"loop period median [\d.]+ ms, p99 [\d.]+ ms; late \d+ of \d+ loops", out)
+
+
+def test_play_takes_its_latency_in_milliseconds(monkeypatch, capsys):
+    from foosball_gym.play import stack
+
+    chosen: dict = {}
+
+    def recording_play_sim(*args, **kwargs):
+        chosen.update(kwargs)
+        return stack.PlayReport()
+
+    monkeypatch.setattr(stack, "play_sim", recording_play_sim)
+    argv = ["play", "scripted", "--env", "Foosball-Block-v0", "--table", "sim"]
+    assert main([*argv, "--latency", "100", "--no-status"]) == 0
+    assert chosen["latency_s"] == pytest.approx(0.1)
 
 
 def test_a_clock_for_a_real_table_is_refused(capsys):
@@ -250,6 +267,107 @@ def test_calibrate_writes_the_camera_pose_into_the_table_configuration(tmp_path,
     assert "camera calibrated" in capsys.readouterr().out
 
 
+def _table_with_intrinsics(tmp_path):
+    """A table file with the simulated camera's intrinsics, and a picture of the field."""
+    interface = task_interface("Foosball-Block-v0")
+    table = SimulatedTable("Foosball-Block-v0", {}, virtual_table_config(interface))
+    try:
+        frame = cv2.cvtColor(table.frame(), cv2.COLOR_RGB2BGR)
+        truth = CameraCalibration.from_camera_model(table.camera_model)
+    finally:
+        table.close()
+    config = load_config(shipped_table("keeper"))
+    config.camera["K"] = truth.K.tolist()
+    path = tmp_path / "table.yaml"
+    save_config(config, path)
+    return path, frame
+
+
+GREEN = (60, 160, 60)
+
+
+def _all_green(frame):
+    return np.full_like(frame, GREEN)
+
+
+def _green_square(frame):
+    out = np.full_like(frame, 128)
+    h, w = frame.shape[:2]
+    out[h // 4 : h // 4 + h // 2, w // 2 - h // 4 : w // 2 + h // 4] = GREEN
+    return out
+
+
+def _field_squeezed(frame):
+    """The field's picture squeezed to two thirds of its width: a field of the wrong shape."""
+    h, w = frame.shape[:2]
+    out = np.full_like(frame, 128)
+    narrow = cv2.resize(frame, (2 * w // 3, h))
+    out[:, w // 6 : w // 6 + narrow.shape[1]] = narrow
+    return out
+
+
+@pytest.mark.parametrize(
+    ("picture", "why"),
+    [
+        (_all_green, "reaches the picture's edge"),
+        (_green_square, "no field of 1.2 x 0.68 m"),
+        (_field_squeezed, "no field of 1.2 x 0.68 m"),
+    ],
+)
+def test_calibrate_refuses_a_picture_that_is_no_table_and_writes_nothing(
+    tmp_path, capsys, picture, why
+):
+    path, frame = _table_with_intrinsics(tmp_path)
+    before = path.read_bytes()
+    image = tmp_path / "field.png"
+    cv2.imwrite(str(image), picture(frame))
+    with pytest.raises(SystemExit) as exit_info:
+        main(["calibrate", "--table", str(path), "--frame", str(image)])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and why in err and "left as it was" in err, err
+    assert path.read_bytes() == before
+
+
+def test_calibrate_refuses_a_picture_over_its_pixel_budget_before_decoding_it(
+    tmp_path, capsys, monkeypatch
+):
+    """A PNG whose header says 40,000 x 30,000 pixels (1.2 gigapixels) is refused from the
+    header: a file of a megabyte can decode to gigabytes."""
+    import struct
+    import zlib
+
+    path, _ = _table_with_intrinsics(tmp_path)
+    before = path.read_bytes()
+    header = struct.pack(">IIBBBBB", 40_000, 30_000, 8, 2, 0, 0, 0)
+    chunk = b"IHDR" + header
+    image = tmp_path / "huge.png"
+    image.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + struct.pack(">I", len(header))
+        + chunk
+        + struct.pack(">I", zlib.crc32(chunk))
+    )
+    decoded: list[str] = []
+    monkeypatch.setattr(cv2, "imread", lambda *a, **k: decoded.append(a[0]))
+    with pytest.raises(SystemExit) as exit_info:
+        main(["calibrate", "--table", str(path), "--frame", str(image)])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert "40000 x 30000 pixels (1200 megapixels)" in err and err.count("\n") == 0, err
+    assert decoded == []
+    assert path.read_bytes() == before
+
+
+@pytest.mark.parametrize("suffix", [".png", ".jpg", ".bmp"])
+def test_a_pictures_size_is_read_from_its_header(tmp_path, suffix):
+    from foosball_gym.vision.calibration import image_size
+
+    image = tmp_path / f"picture{suffix}"
+    cv2.imwrite(str(image), np.zeros((45, 123, 3), np.uint8))
+    assert image_size(image) == (123, 45)
+
+
 def test_playing_a_real_table_without_a_calibrated_camera_is_refused(tmp_path, capsys):
     path = tmp_path / "table.yaml"
     save_config(load_config(shipped_table("keeper")), path)
@@ -257,6 +375,123 @@ def test_playing_a_real_table_without_a_calibrated_camera_is_refused(tmp_path, c
         main(["play", "scripted", "--env", "Foosball-Block-v0", "--table", str(path)])
     assert exit_info.value.code == 2
     assert "calibrate" in capsys.readouterr().err
+
+
+def _bad_table_file(tmp_path):
+    path = tmp_path / "table.yaml"
+    path.write_text("joints: [\n")
+    return path
+
+
+def _table_whose_bus_does_not_open(tmp_path, interface="socketcan", channel="nocan9"):
+    """A calibrated table file whose camera opens (a video file) and whose CAN bus does not."""
+    from foosball_gym.camera import CameraModel
+    from foosball_gym.hardware.config import BusConfig
+
+    video = str(tmp_path / "camera.avi")
+    writer = cv2.VideoWriter(video, cv2.VideoWriter_fourcc(*"MJPG"), 30, (160, 90))
+    for _ in range(5):
+        writer.write(np.zeros((90, 160, 3), np.uint8))
+    writer.release()
+    config = load_config(shipped_table("keeper"))
+    config.camera["calibration"] = CameraCalibration.from_camera_model(
+        CameraModel(160, 90)
+    ).to_dict()
+    config.camera["source"] = video
+    config.bus = BusConfig(interface=interface, channel=channel)
+    path = tmp_path / "table.yaml"
+    save_config(config, path)
+    return path
+
+
+def _bad_model(tmp_path):
+    path = tmp_path / "model.zip"
+    path.write_bytes(b"not a zip")
+    return path
+
+
+SIM = ["--table", "sim", "--episodes", "1", "--camera", "160x90"]
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        "a log path that is a folder",
+        "a log that cannot be created",
+        "a table file that does not load",
+        "a table whose bus does not open",
+        "a table whose bus's driver is missing",
+        "a model that does not load",
+    ],
+)
+def test_play_with_a_bad_input_exits_with_its_line_and_leaves_no_process_behind(tmp_path, case):
+    """Every error ends what the command started (the simulated table's camera process, a
+    camera, drives): a log it could not open once left the camera process running, and the
+    command waiting on it for ever."""
+    if case == "a log that cannot be created" and not os.path.isdir("/proc/self"):
+        pytest.skip("needs /proc, which refuses new files")
+    scripted = ["scripted", "--env", "Foosball-Block-v0"]
+    # Only the case's own files are made: each table file is table.yaml.
+    make = {
+        # Real time: the table starts its camera process before the log is opened.
+        "a log path that is a folder": lambda: [*scripted, *SIM, "--log", str(tmp_path)],
+        "a log that cannot be created": lambda: [*scripted, *SIM, "--log", "/proc/x.jsonl"],
+        "a table file that does not load": lambda: [
+            *scripted,
+            "--table",
+            str(_bad_table_file(tmp_path)),
+        ],
+        "a table whose bus does not open": lambda: [
+            *scripted,
+            "--table",
+            str(_table_whose_bus_does_not_open(tmp_path)),
+        ],
+        # python-can's slcan wants pyserial, which the hardware extra does not install (with
+        # it, the missing device is the error).
+        "a table whose bus's driver is missing": lambda: [
+            *scripted,
+            "--table",
+            str(_table_whose_bus_does_not_open(tmp_path, "slcan", "/dev/no-such-adapter")),
+        ],
+        "a model that does not load": lambda: [
+            str(_bad_model(tmp_path)),
+            "--env",
+            "Foosball-Block-v0",
+            *SIM,
+        ],
+    }
+    argv = make[case]()
+    # A session of its own: whatever the command leaves running is found by its group.
+    play = subprocess.Popen(
+        [sys.executable, "-m", "foosball_gym.cli", "play", *argv, "--no-status"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        _, err = play.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        os.killpg(play.pid, signal.SIGKILL)
+        play.communicate()
+        pytest.fail(f"foosball play with {case} ran on for 60 s")
+    lines = err.strip().splitlines()
+    if case == "a table whose bus's driver is missing":
+        # python-can logs the module it misses as it loads the interface, before the error.
+        lines = [line for line in lines if "You won't be able to use" not in line]
+    assert play.returncode == 2 and len(lines) == 1, err
+    assert lines[0].startswith("foosball play: error: "), err
+    left = True
+    for _ in range(50):  # a process just ended may take a moment to be reaped
+        try:
+            os.killpg(play.pid, 0)
+        except ProcessLookupError:
+            left = False
+            break
+        time.sleep(0.1)
+    if left:
+        os.killpg(play.pid, signal.SIGKILL)
+    assert not left, f"foosball play with {case} left a process behind"
 
 
 def test_the_shipped_table_configuration_loads():

@@ -200,6 +200,16 @@ def test_a_real_tables_log_replays_without_a_truth_and_with_the_opponents_spin_u
             "line 2 is not a loop record",
         ),
         ("not json\n", "not a foosball play --log session"),
+        ('{"header": [1]}\n{"t": 0}\n', "its header is list, not an object"),
+        ('{"header": {"observation": 5}}\n{"t": 0}\n', "observation is no list of names"),
+        (
+            '{"header": {"observation": ["ball_x", "ball_y"], "env_id": [1]}}\n{"t": 0}\n',
+            "env_id is list, not a string",
+        ),
+        ('{"header": {}}\n[1, 2]\n', "line 2 is list, not a loop record"),
+        ('{"header": {}}\n{"t": ' + "9" * 400 + "}\n", "an integer of 400 digits"),
+        ("[" * 100_000 + "]" * 100_000 + "\n", "nested too deep"),
+        ('{"header": {}}\n' + "[" * 100_000 + "]" * 100_000 + "\n", "nested too deep"),
     ],
 )
 def test_a_file_that_is_no_play_log_is_refused_in_one_line(tmp_path, capsys, content, message):
@@ -409,6 +419,114 @@ def test_a_play_sessions_page_opens_without_console_errors(browser, session_log,
     finally:
         page.close()
     assert errors == []
+
+
+# Strings that once swallowed the page's own script ("<!--<script>"), or that would end it,
+# open markup or break a line in JavaScript, where a log or a path can put them.
+CRAFTED = "<!--<script> </script><script>window.injected = 1</script> &amp; \u2028\u2029 \"'"
+
+
+def tiny_log(path: Path, env_id: str) -> Path:
+    """A session log of 40 loops of one keeper, its env id ``env_id``."""
+    header = {"env_id": env_id, "observation": ["ball_x", "ball_y"]}
+    lines = [json.dumps({"header": header})]
+    for k in range(40):
+        record = {
+            "t": k / 60,
+            "new_ball": k == 0,
+            "own_state": {"home_keeper.slide": [0.01 * k, 0.0], "home_keeper.spin": [0.0, 0.0]},
+            "observation": [0.01 * k - 0.2, 0.05],
+            "ball_measured": [0.01 * k - 0.2, 0.05],
+        }
+        lines.append(json.dumps(record))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def assert_shown_as_data(browser, page_path: Path, title: str) -> None:
+    """The page opens and plays, shows ``title`` as text, and runs nothing it carries."""
+    errors: list[str] = []
+    page = open_page(browser, page_path, errors)
+    try:
+        shown = page.evaluate(
+            "[document.querySelector('h1'), document.querySelector('title')]"
+            ".map((e) => e.textContent)"
+        )
+        assert shown == [title, title]
+        assert page.evaluate("window.injected") is None
+        page.evaluate("replay.seek(0, 5)")
+        assert page.evaluate("replay.frame") == 5
+    finally:
+        page.close()
+    assert errors == []
+
+
+def test_a_crafted_env_id_in_a_log_is_shown_as_text(browser, tmp_path):
+    log = tiny_log(tmp_path / "session.jsonl", f"Foosball-{CRAFTED}")
+    out = tmp_path / "page.html"
+    assert main(["replay", str(log), "--html", str(out)]) == 0
+    assert_shown_as_data(browser, out, f"Foosball-{CRAFTED}: session.jsonl")
+
+
+def test_a_crafted_log_file_name_is_shown_as_text(browser, tmp_path):
+    name = "<!--<script> &amp; \u2028.jsonl"
+    log = tiny_log(tmp_path / name, "Foosball-Block-v0")
+    out = tmp_path / "page.html"
+    assert main(["replay", str(log), "--html", str(out)]) == 0
+    assert_shown_as_data(browser, out, f"Foosball-Block-v0: {name}")
+
+
+def test_a_crafted_model_path_in_an_evaluation_page_is_shown_as_text(browser, tmp_path):
+    import shutil
+
+    import foosball_gym
+
+    run = tmp_path / "<!--<script> & </script>"
+    shutil.copytree(Path(foosball_gym.__file__).parent / "builtin" / "block", run)
+    out = tmp_path / "eval.html"
+    argv = ["eval", str(run / "model.zip"), "--episodes", "1", "--replay", str(out)]
+    assert main(argv) == 0
+    data = json.loads(re.search(r'id="replay-data">(.*?)</script>', out.read_text(), re.S).group(1))
+    assert "<!--<script> & </script>" in data["title"]
+    assert_shown_as_data(browser, out, data["title"])
+
+
+def test_a_long_matchs_track_shows_its_last_seconds_unless_the_whole_is_asked_for(
+    browser, tmp_path
+):
+    recording = synthetic_session(1, 30 * table.CONTROL_HZ, ("home_keeper", "away_keeper"))
+    out = write_html(recording, tmp_path / "match.html")
+    errors: list[str] = []
+    page = open_page(browser, out, errors)
+    try:
+        last = 30 * table.CONTROL_HZ - 1
+        page.evaluate(f"replay.seek(0, {last})")
+        # The last 2 s, not the 30 s tangle.
+        assert last - page.evaluate("replay.trackFrom") == pytest.approx(
+            2 * table.CONTROL_HZ, abs=1
+        )
+        assert not page.is_checked("#whole-track")
+        page.check("#whole-track")
+        assert page.evaluate("replay.trackFrom") == 0
+    finally:
+        page.close()
+    assert errors == []
+
+
+def test_a_long_title_wraps_on_a_phone_width_screen(browser, tmp_path):
+    recording = synthetic_session(1, 60, ("home_keeper",))
+    recording.title = "/home/student/runs/" + "keeper_vs_keeper_selfplay_" * 4 + "1/model.zip on x"
+    out = write_html(recording, tmp_path / "phone.html")
+    page = browser.new_page(viewport={"width": 390, "height": 844})
+    try:
+        page.goto(out.resolve().as_uri())
+        page.wait_for_function("document.body.dataset.ready")
+        assert page.evaluate("document.documentElement.scrollWidth") <= 390
+        box = page.locator("h1").bounding_box()
+        assert box["x"] >= 0 and box["x"] + box["width"] <= 390
+        assert box["height"] > 40  # on several lines
+    finally:
+        page.close()
 
 
 def test_the_replay_module_reads_logs_without_the_simulator(tmp_path):

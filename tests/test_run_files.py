@@ -218,6 +218,12 @@ def test_the_shipped_policies_statistics_pass_the_checks():
         ("[]", "JSON list, not a run's configuration", "JSON list, not the object"),
         ('"x"', "JSON str, not a run's configuration", "JSON str, not the object"),
         ('{"env_id": ', "not valid JSON", "not valid JSON"),
+        ("[" * 100_000 + "]" * 100_000, "nested too deep", "nested too deep"),
+        (
+            '{"env_id": "Foosball-Block-v0", "seed": ' + "7" * 5000 + "}",
+            "4300 digits",
+            "5000 digits",
+        ),
         ({"env_kwargs": []}, "env_kwargs must be an object", "env_kwargs must be an object"),
         ({"env_kwargs": None}, "env_kwargs must be an object", "env_kwargs must be an object"),
         ({"env_kwargs": {"residual": "big"}}, "residual must be a number", "residual must be"),
@@ -260,6 +266,11 @@ def test_a_damaged_curve_or_best_record_is_refused_in_one_line(run, capsys):
     best.unlink()
     (run / "eval.csv").write_text("timesteps,wall_seconds\n128,x\n")
     assert "eval.csv, line 2" in refused(argv, capsys)
+    # A row no cut could keep or count lost: once dropped without a word.
+    (run / "eval.csv").write_text("timesteps,wall_seconds\n128,1.0\nnan,2.0\n")
+    assert "eval.csv, line 3: its timesteps is nan, not a finite number" in refused(argv, capsys)
+    (run / "eval.csv").write_bytes(b"timesteps,wall_seconds\n128,\xff\xfe\n")
+    assert f"{run / 'eval.csv'} is not an evaluation curve: not UTF-8" in refused(argv, capsys)
 
 
 @pytest.fixture(scope="module")
@@ -378,6 +389,52 @@ def test_a_weights_entry_whose_own_records_inflate_past_the_limit_is_refused_bef
     with pytest.raises(ValueError, match="its entry policy.pth says it inflates to 6 MiB"):
         read_model_zip(run / "model.zip")
     assert loaded == []
+
+
+def lying_zip(path: Path, declared: int, inflated: int) -> None:
+    """A zip whose one entry, ``data``, says it inflates to ``declared`` bytes and inflates to
+    ``inflated`` (zeros; its check sum theirs)."""
+    import struct
+    import zlib
+
+    deflate = zlib.compressobj(9, zlib.DEFLATED, -15)
+    compressed, crc, block = bytearray(), 0, bytes(2**20)
+    for _ in range(inflated // len(block)):
+        compressed += deflate.compress(block)
+        crc = zlib.crc32(block, crc)
+    compressed += deflate.flush()
+    name = b"data"
+    sizes = (crc, len(compressed), declared, len(name))
+    local = struct.pack("<IHHHHHIIIHH", 0x04034B50, 20, 0, 8, 0, 0, *sizes, 0)
+    central = struct.pack(
+        "<IHHHHHHIIIHHHHHII", 0x02014B50, 20, 20, 0, 8, 0, 0, *sizes, 0, 0, 0, 0, 0, 0
+    )
+    start = len(local) + len(name) + len(compressed)
+    directory = central + name
+    end = struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, 1, 1, len(directory), start, 0)
+    path.write_bytes(local + name + bytes(compressed) + directory + end)
+
+
+def test_a_zip_entry_that_inflates_past_the_size_it_declares_is_refused_at_that_size(
+    tmp_path, capsys
+):
+    """An entry that says 100 bytes and inflates to 256 MiB: once inflated whole (ZipFile.read
+    takes up to 2 GiB in one go) before its check sum refused it."""
+    import tracemalloc
+
+    path = tmp_path / "model.zip"
+    lying_zip(path, declared=100, inflated=256 * 2**20)
+    assert path.stat().st_size < 2**20
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError, match="a damaged one"):
+            read_model_zip(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 32 * 2**20, f"{peak / 2**20:.0f} MiB inflated"
+    err = refused(["eval", str(path), "--env", "Foosball-Block-v0", "--episodes", "1"], capsys)
+    assert "is not a zip file, or a damaged one" in err
 
 
 def test_the_size_limit_holds_the_policies_of_this_package_many_times_over(trained):

@@ -149,6 +149,19 @@ def test_a_hand_made_log_reads_into_arrays(good_log):
             lambda p: write_log(p, header(), [{"t": 0.0}]),
             "line 2 is not a loop record of foosball play",
         ),
+        (lambda p: p.write_text("[" * 100_000 + "]" * 100_000 + "\n"), "nested too deep"),
+        (
+            lambda p: p.write_text(
+                json.dumps({"header": header()}) + "\n" + "[" * 100_000 + "]" * 100_000 + "\n"
+            ),
+            "line 2: JSON nested too deep",
+        ),
+        (
+            lambda p: p.write_text(
+                json.dumps({"header": header()}) + '\n{"t": ' + "9" * 400 + "}\n"
+            ),
+            "line 2: an integer of 400 digits",
+        ),
     ],
 )
 def test_a_bad_log_is_refused_in_one_line_with_exit_2(make, message, tmp_path, capsys):
@@ -186,6 +199,10 @@ def test_the_outputs_are_checked_before_the_fit(good_log, capsys):
     )
     assert "--env Foosball-Block-v0 names the environment of --config" in sysid_error(
         [str(good_log), "--env", ENV_ID], capsys
+    )
+    pytest.importorskip("matplotlib")
+    assert "--plot fit.txt: the picture's suffix must be one of" in sysid_error(
+        [str(good_log), "--plot", "fit.txt"], capsys
     )
 
 

@@ -23,6 +23,7 @@ import threading
 import time
 
 import can
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -310,6 +311,186 @@ def test_play_real_stops_a_table_whose_camera_gives_the_same_frame_again(
         assert not [e for e in events if e.what == "rpdo" and e.t > stop.t]
         assert_braked_then_off(events, QUICK_STOP, stop.t - 1e-9)
         assert drive.state == OFF
+
+
+@pytest.mark.parametrize("counter", ["no frame counter", "a frame counter that stops"])
+def test_a_camera_that_gives_its_last_picture_under_new_time_stamps_stops_the_table(
+    monkeypatch, tables_seen, counter
+):
+    """A stalled camera or capture driver hands out its last picture again, stamped with the
+    time it was read (as ``OpenCVSource`` stamps frames): newer time stamps are no new
+    picture. Without a frame counter the loop sees the pixels unchanged; with one, the number
+    standing still. The table stops within ``watchdog_s`` and one control period of the last
+    new picture (on the simulated clock), then brakes and switches off."""
+    from foosball_gym.play import stack
+
+    pictures: list[float] = []
+
+    class StalledCamera(stack._TableCamera):
+        reads = 0
+
+        def read(self):
+            StalledCamera.reads += 1
+            if StalledCamera.reads <= 40 or not pictures:
+                t, picture = super().read()
+                if picture is not None:
+                    self.last = picture
+                    pictures.append(self.table.clock())
+                if counter == "no frame counter":
+                    self.frame_number = None
+                return t, picture
+            # The last picture again, stamped as it is read, its number (if any) unchanged.
+            return self.table.clock() + 1e-6, self.last.copy()
+
+    monkeypatch.setattr(stack, "_TableCamera", StalledCamera)
+    with pytest.raises(WatchdogTripped) as info:
+        play_sim(swinging(), "Foosball-Block-v0", {}, episodes=5, camera_size=SMALL_CAMERA)
+    assert info.value.what == "state estimate"
+    assert "the camera gave its last picture again" in str(info.value)
+    config = simulated_table.virtual_table_config(task_interface("Foosball-Block-v0", {}))
+    (drives,) = tables_seen
+    for events, state, _ in drives.values():
+        stop = next(e for e in events if e.what == "controlword" and e.value == CW_QUICK_STOP)
+        assert pictures[-1] < stop.t <= pictures[-1] + config.watchdog_s + DT + 1e-9
+        assert [e for e in events if e.what == "rpdo" and pictures[-1] < e.t < stop.t]
+        assert not [e for e in events if e.what == "rpdo" and e.t > stop.t]
+        assert_braked_then_off(events, QUICK_STOP, stop.t - 1e-9)
+        assert state == OFF
+
+
+def test_a_still_table_seen_by_the_simulated_camera_is_no_frozen_camera():
+    """A lock-step table whose rods and ball stand still (a resting ball, a keeper held in
+    place) renders the same pixels frame after frame: its frames are numbered by the time
+    they show, so the loop plays on to the end of the episode."""
+    report = play_sim(
+        lambda obs: np.zeros(2, np.float32),
+        "Foosball-Score-v0",
+        {"ball_start": "resting"},
+        episodes=1,
+        camera_size=SMALL_CAMERA,
+        # No camera errors: a still scene renders byte for byte alike.
+        camera_errors=False,
+    )
+    assert report.episodes == 1
+    assert report.steps == gym.spec("Foosball-Score-v0").max_episode_steps
+
+
+def test_a_video_file_of_a_still_scene_is_no_frozen_camera(tmp_path):
+    """A video's frames are numbered by their place in the file: ten alike (a still scene)
+    are ten new pictures for the watchdog, where a camera's ten alike would be one."""
+    import cv2
+
+    from foosball_gym.play.loop import PlayLoop
+    from foosball_gym.vision import OpenCVSource
+
+    path = str(tmp_path / "still.avi")
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), 60, (160, 90))
+    for _ in range(10):
+        writer.write(np.full((90, 160, 3), 90, np.uint8))
+    writer.release()
+
+    class Drives:
+        fed: list[float] = []
+
+        def feed_state(self, now):
+            self.fed.append(now)
+
+        def command(self, targets, now):
+            return targets
+
+    source = OpenCVSource(path)
+    drives = Drives()
+    interface = task_interface("Foosball-Block-v0", {})
+    loop = PlayLoop(lambda obs: obs, interface, drives, source, None, None, None)
+    for _ in range(10):
+        loop.hold({})
+    source.close()
+    assert len(drives.fed) == 10
+
+
+def test_play_real_stops_a_table_whose_camera_gives_its_last_picture_under_new_time_stamps(
+    monkeypatch, realtime_table
+):
+    """``play_real`` with a camera that, after 30 pictures, gives the last one again stamped
+    with the time it is read (as ``OpenCVSource`` stamps a camera's frames): the loop commands
+    on, but the state watchdog stops the table, which brakes and switches off."""
+    from foosball_gym.camera import CameraModel
+    from foosball_gym.play import stack
+    from foosball_gym.vision import CameraCalibration
+
+    config = keeper_config()
+    config.control_hz = 40.0  # as in the test above: room for the drives' answer
+    model = CameraModel(*SMALL_CAMERA)
+    config.camera["calibration"] = CameraCalibration.from_camera_model(model).to_dict()
+    table = realtime_table(config)
+    rng = np.random.default_rng(0)
+    given: list[float] = []
+
+    class StalledCamera:
+        def __init__(self, *args):
+            self.picture = None
+
+        def read(self):
+            if len(given) < 30:
+                # A sensor's noise: every real picture differs from the last somewhere.
+                self.picture = rng.integers(0, 8, (model.height, model.width, 3), np.uint8)
+                given.append(time.monotonic())
+            return time.monotonic(), self.picture.copy()
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(stack, "OpenCVSource", StalledCamera)
+    interface = task_interface("Foosball-Score-v0", {})
+    with pytest.raises(WatchdogTripped) as info:
+        play_real(lambda obs: np.array([1.0, 1.0]), interface, config, 10.0, status=False)
+    assert info.value.what == "state estimate"
+    assert "the camera gave its last picture again" in str(info.value)
+    assert len(given) == 30  # the fresh pictures kept it going
+    table.wait_until_off()
+    for drive in table.sim_drives.drives.values():
+        events = list(drive.events)
+        stop = next(e for e in events if e.what == "controlword" and e.value == CW_QUICK_STOP)
+        assert given[-1] < stop.t
+        assert not [e for e in events if e.what == "rpdo" and e.t > stop.t]
+        assert_braked_then_off(events, QUICK_STOP, stop.t - 1e-9)
+        assert drive.state == OFF
+
+
+def test_a_killed_camera_process_stops_the_table_with_one_error_and_no_traceback(
+    monkeypatch, tables_seen, capfd
+):
+    """``play_sim`` in real time, its camera process killed: the table's clock thread and the
+    loop both meet the closed pipe; the loop's read ends the session with an OSError that says
+    so (one line from ``foosball play``), and the drives brake and switch off."""
+    tables: list = []
+    real_init = simulated_table.SimulatedTable.__init__
+
+    def init(self, *args, **kwargs):
+        real_init(self, *args, **kwargs)
+        tables.append(self)
+
+    monkeypatch.setattr(simulated_table.SimulatedTable, "__init__", init)
+    calls = itertools.count()
+    swing_policy = swinging()
+
+    def policy(obs):
+        if next(calls) == 40:
+            process = tables[0]._camera._process
+            os.kill(process.pid, signal.SIGKILL)
+            process.join(timeout=10)
+        return swing_policy(obs)
+
+    # An OSError: foosball play's one line.
+    with pytest.raises(OSError, match="camera process was killed by SIGKILL"):
+        play_sim(
+            policy, "Foosball-Block-v0", {}, episodes=5, camera_size=SMALL_CAMERA, realtime=True
+        )
+    assert "Traceback" not in capfd.readouterr().err
+    (drives,) = tables_seen
+    for events, state, _ in drives.values():
+        assert_braked_then_off(events, QUICK_STOP, first_quick_stop(events) - 1e-9)
+        assert state == OFF
 
 
 # ---------------------------------------------------------------------------- a hung master

@@ -434,7 +434,11 @@ def load_config(path: str | os.PathLike) -> TableConfig:
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as e:
-        raise ConfigError("<file>", f"is not valid YAML: {e}", str(path)) from None
+        # PyYAML's own message quotes the line over several; one line says where.
+        problem = getattr(e, "problem", None) or " ".join(str(e).split())
+        mark = getattr(e, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        raise ConfigError("<file>", f"is not valid YAML: {problem}{where}", str(path)) from None
     try:
         config = TableConfig.from_dict(data)
     except ConfigError as e:

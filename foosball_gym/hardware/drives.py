@@ -180,7 +180,16 @@ class TableDrives:
             network = canopen.Network()
             network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
             bus = config.bus
-            network.connect(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
+            try:
+                network.connect(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
+            except Exception as err:  # noqa: BLE001 - each interface's library fails its own way
+                # python-can's interfaces raise what their libraries do when a driver or a
+                # module is missing (CanError, NameError, ...): an OSError, as one that cannot
+                # open its device raises, is what a caller catches.
+                raise OSError(
+                    f"cannot open the CAN bus {bus.interface} {bus.channel!r}: "
+                    f"{' '.join(str(err).split()) or type(err).__name__}"
+                ) from err
         self.network = network
         self._closed = False
         try:

@@ -56,13 +56,18 @@ class WatchdogTripped(SafetyError):
     Attributes:
         what: ``"command"`` or ``"state estimate"``.
         age: how old it was, in seconds.
+        timeout: the watchdog's limit, in seconds.
+        why: what the master knows of the cause (a frozen camera), or "".
     """
 
-    def __init__(self, what: str, age: float, timeout: float) -> None:
+    def __init__(self, what: str, age: float, timeout: float, why: str = "") -> None:
         self.what = what
         self.age = age
+        self.timeout = timeout
+        self.why = why
         super().__init__(
             f"watchdog: the last {what} is {age * 1e3:.1f} ms old (limit {timeout * 1e3:.1f} ms)"
+            + (f": {why}" if why else "")
         )
 
 

@@ -7,14 +7,17 @@ step of the simulation differ (see :mod:`foosball_gym.play.stack`).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
-from collections.abc import Callable, Mapping
+import zlib
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from foosball_gym.hardware.safety import WatchdogTripped
 from foosball_gym.policy_io.task import Joint, TaskInterface
 
 STAGES = ("frame", "detect", "estimate", "policy", "command", "read")
@@ -64,8 +67,12 @@ class PlayLoop:
         drives: the table's drives (``TableDrives``), already brought up.
         source: the camera (``read() -> (t, frame) | None``, None at its end); a frame of
             None is one taken at ``t`` that came too late to use, a missed detection. Only a
-            picture newer than the last feeds the drives' state watchdog: a camera that stops
-            delivering them stops the table within ``watchdog_s`` and one control period.
+            new picture feeds the drives' state watchdog: a camera that stops delivering them
+            stops the table within ``watchdog_s`` and one control period. A picture is new
+            when its time is later than the last one's and, where the source counts its
+            frames (a ``frame_number`` attribute, the number of the frame ``read`` gave), its
+            number changed; else where its pixels differ from the last picture's. A frozen
+            camera that hands out its last picture under fresh time stamps is a fault.
         detector: the ball detector (``detect(frame) -> Detection | None``).
         calibration: pixel → table-plane back-projection (``pixel_to_table``).
         estimator: the Kalman filters (``update``, ``observation``).
@@ -113,6 +120,10 @@ class PlayLoop:
         # The time of the last frame that came with a picture: what the state estimate is as
         # fresh as.
         self._last_seen: float | None = None
+        self._last_number: object = None
+        self._last_fingerprint: int | None = None
+        # Pictures given again since the last new one: what a watchdog stop is put down to.
+        self._repeats = 0
         self._first_frame_early_by = 0.0
 
     def start(self, state: Mapping[Joint, tuple[float, float]] | None = None) -> None:
@@ -156,12 +167,29 @@ class PlayLoop:
 
     def command(self, targets: Mapping[Joint, float]) -> None:
         """Send ``targets`` (m or rad) through the safety layer, not the policy's."""
-        self.drives.command(targets, self.clock())
+        with self._frozen_named():
+            self.drives.command(targets, self.clock())
 
     def settle(self) -> None:
         """The drives' state after a :meth:`hold` step, and the watchdog and fault checks."""
         self._state = self.drives.read()
-        self.drives.check(self.clock())
+        self._check()
+
+    def _check(self) -> None:
+        with self._frozen_named():
+            self.drives.check(self.clock())
+
+    @contextlib.contextmanager
+    def _frozen_named(self) -> Iterator[None]:
+        """A state watchdog's stop (from a command or a check) says the camera froze, where
+        it gave its last picture again."""
+        try:
+            yield
+        except WatchdogTripped as err:
+            if err.what != "state estimate" or not self._repeats or err.why:
+                raise
+            why = f"the camera gave its last picture again, {self._repeats} times"
+            raise WatchdogTripped(err.what, err.age, err.timeout, why) from None
 
     def _perceive(
         self, times: dict[str, float]
@@ -190,14 +218,33 @@ class PlayLoop:
         if got is None:
             raise EOFError("the camera has no more frames")
         frame_time, frame = got
-        if frame is not None and (self._last_seen is None or frame_time > self._last_seen):
+        if frame is not None and self._new_picture(frame_time, frame):
             # Only a new picture is news for the state estimate: a camera that delivers none
             # (frozen, or read() giving the last frame again) trips the watchdog, however
             # busily the loop goes on predicting.
             self._last_seen = frame_time
+            self._repeats = 0
             self.drives.feed_state(self.clock() + self._first_frame_early_by)
             self._first_frame_early_by = 0.0
         return frame_time, frame
+
+    def _new_picture(self, frame_time: float, frame: Any) -> bool:
+        """Whether ``frame`` is a picture the camera has not given before."""
+        if self._last_seen is not None and frame_time <= self._last_seen:
+            return False
+        number = getattr(self.source, "frame_number", None)
+        if number is not None:
+            new = number != self._last_number
+            self._last_number = number
+        else:
+            # A stalled USB camera or capture driver hands out its last picture again, stamped
+            # with the time it was read. A sensor's noise changes some pixel in every real
+            # picture, so one identical to the last, byte for byte, is that picture again.
+            fingerprint = zlib.crc32(np.ascontiguousarray(frame).data)
+            new = fingerprint != self._last_fingerprint
+            self._last_fingerprint = fingerprint
+        self._repeats += not new
+        return new
 
     def decide(self) -> LoopRecord:
         """Everything before the targets go out: camera to action."""
@@ -238,7 +285,8 @@ class PlayLoop:
         """Targets through the safety layer to the drives."""
         start = time.perf_counter()
         targets = self.interface.action_to_targets(record.action)
-        sent = self.drives.command(targets, record.t)
+        with self._frozen_named():
+            sent = self.drives.command(targets, record.t)
         record.targets = {_key(j): float(v) for j, v in sent.items()}
         record.stage_ms["command"] = 1e3 * (time.perf_counter() - start)
 
@@ -246,7 +294,7 @@ class PlayLoop:
         """The drives' state after the step; the watchdog and fault checks."""
         start = time.perf_counter()
         self._state = self.drives.read()
-        self.drives.check(self.clock())
+        self._check()
         record.stage_ms["read"] = 1e3 * (time.perf_counter() - start)
         if self.on_record is not None:
             self.on_record(record)

@@ -15,6 +15,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from foosball_gym import user_json
 from foosball_gym.play.loop import LoopRecord
 
 
@@ -36,13 +37,23 @@ class SessionLog:
 
 def read_session(path: str | Path) -> tuple[dict[str, Any], Iterator[dict[str, Any]]]:
     """The header and the records of a session log."""
-    lines = Path(path).read_text().splitlines()
+    lines = Path(path).read_text(encoding="utf-8").splitlines()
     if not lines:
         raise ValueError(f"{path} is empty, not a session log")
-    header = json.loads(lines[0]).get("header")
+    first = user_json.loads(lines[0])
+    header = first.get("header") if isinstance(first, dict) else None
     if header is None:
         raise ValueError(f"{path} does not start with a session header")
-    return header, (json.loads(line) for line in lines[1:])
+    if not isinstance(header, dict):
+        raise ValueError(f"{path}: its header is {type(header).__name__}, not an object")
+    return header, (_record(line, number) for number, line in enumerate(lines[1:], start=2))
+
+
+def _record(line: str, number: int) -> dict[str, Any]:
+    record = user_json.loads(line)
+    if not isinstance(record, dict):
+        raise ValueError(f"line {number} is {type(record).__name__}, not a loop record")
+    return record
 
 
 def replay(

@@ -189,13 +189,18 @@ def play_real(
     the way out, whatever happens."""
     perception = build_perception(config, interface, latency_s)
     camera = config.camera
-    source = OpenCVSource(
-        camera.get("source", 0), camera.get("width"), camera.get("height"), camera.get("fps")
-    )
     report = PlayReport()
-    on_record, log = _recorders(report, log_path, _header(interface, config), status)
     period = config.control_period
-    try:
+    # Whatever is opened is closed however the session ends, a log that cannot be written
+    # included: a camera left open holds its device until the process ends.
+    with contextlib.ExitStack() as opened:
+        source = OpenCVSource(
+            camera.get("source", 0), camera.get("width"), camera.get("height"), camera.get("fps")
+        )
+        opened.callback(source.close)
+        on_record, log = _recorders(report, log_path, _header(interface, config), status)
+        if log is not None:
+            opened.callback(log.close)
         with TableDrives(config) as drives, collector_paused_for_old_objects():
             drives.bring_up()
             loop = PlayLoop(policy, interface, drives, source, *perception, on_record=on_record)
@@ -208,10 +213,6 @@ def play_real(
                 next_tick += period
                 time.sleep(max(0.0, next_tick - time.monotonic()))
                 loop.receive(record)
-    finally:
-        source.close()
-        if log is not None:
-            log.close()
     return report
 
 
@@ -291,22 +292,26 @@ def play_sim(
         serves=serves,
         camera_errors=camera_errors,
     )
-    if rod is not None:
-        keys = table.keyboard_events
-        dt = table.sim.control_dt
-        table.set_opponent(
-            HumanOpponent(keys, interface.layout, rod, dt, table.opponent, view=view)
-        )
-    calibration = CameraCalibration.from_camera_model(table.camera_model)
-    config.camera["calibration"] = calibration.to_dict()
-    perception = build_perception(config, interface, latency_s)
-    source = _TableCamera(table)
-    report = PlayReport()
-    header = _header(interface, config, env_id, env_kwargs)
-    on_record, log = _recorders(report, log_path, header, status)
-    max_steps = table.serve_steps or gym.spec(env_id).max_episode_steps
-    assert max_steps is not None  # every id is registered with its time limit
+    # Everything the table started (its camera, its viewer, its drives' threads) ends however
+    # the session does, a log that cannot be opened included: left running, they keep the
+    # command from ever exiting.
+    log: SessionLog | None = None
     try:
+        if rod is not None:
+            keys = table.keyboard_events
+            dt = table.sim.control_dt
+            table.set_opponent(
+                HumanOpponent(keys, interface.layout, rod, dt, table.opponent, view=view)
+            )
+        calibration = CameraCalibration.from_camera_model(table.camera_model)
+        config.camera["calibration"] = calibration.to_dict()
+        perception = build_perception(config, interface, latency_s)
+        source = _TableCamera(table)
+        report = PlayReport()
+        header = _header(interface, config, env_id, env_kwargs)
+        on_record, log = _recorders(report, log_path, header, status)
+        max_steps = table.serve_steps or gym.spec(env_id).max_episode_steps
+        assert max_steps is not None  # every id is registered with its time limit
         # Supervision runs on the table's clock: simulated time in lock-step, where a slow
         # frame is no silence on the table, and the wall clock in real time.
         with (
@@ -436,15 +441,18 @@ READY_STEPS = 120
 
 class _TableCamera:
     """The simulated table's camera as a frame source: frames stamped with the table time of
-    the scene they show."""
+    the scene they show, which numbers them too (a still scene renders the same pixels, and
+    is no frozen camera)."""
 
     def __init__(self, table: Any) -> None:
         self.table = table
+        self.frame_number: float | None = None
 
     def read(self) -> tuple[float, np.ndarray | None]:
         t, frame = self.table.read()
         if frame is None:
             return t, None
+        self.frame_number = t
         return t, np.ascontiguousarray(frame[:, :, ::-1])  # RGB to the BGR of OpenCV sources
 
     def close(self) -> None:

@@ -118,9 +118,22 @@ def _asset(name: str) -> str:
     return (resources.files("foosball_gym.replay") / "assets" / name).read_text()
 
 
+# What a <script> element's text must not hold as written: "</script" ends it, and "<!--"
+# followed by "<script" puts the parser where the element's own end tag no longer ends it (the
+# page's script is swallowed, the page left blank). "&" and the line separators are escaped as
+# well, so the text means the same read as HTML, JavaScript or JSON.
+_SCRIPT_ESCAPES = {
+    ord("<"): "\\u003c",
+    ord(">"): "\\u003e",
+    ord("&"): "\\u0026",
+    0x2028: "\\u2028",
+    0x2029: "\\u2029",
+}
+
+
 def _json_in_script(value: Any) -> str:
-    """JSON that a ``<script>`` element holds as written: ``</`` would end the element."""
-    return json.dumps(value, separators=(",", ":")).replace("</", "<\\/")
+    """JSON that a ``<script>`` element holds as data, whatever strings it carries."""
+    return json.dumps(value, separators=(",", ":")).translate(_SCRIPT_ESCAPES)
 
 
 def render_html(recording: Recording) -> str:
@@ -179,6 +192,7 @@ class NotebookReplay:
     def _repr_html_(self) -> str:
         page = html.escape(self.path.read_text(encoding="utf-8"), quote=True)
         return (
-            f'<iframe srcdoc="{page}" sandbox="allow-scripts" title="{self.path.name}" '
+            f'<iframe srcdoc="{page}" sandbox="allow-scripts" '
+            f'title="{html.escape(self.path.name, quote=True)}" '
             f'style="width: 100%; height: {self.height}px; border: 0"></iframe>'
         )

@@ -69,23 +69,27 @@ def recording_from_session(path: str | Path) -> Recording:
     try:
         header, lines = read_session(path)
         records = list(lines)
-    except (ValueError, AttributeError) as err:
+    except ValueError as err:
         raise LogError(f"{path} is not a foosball play --log session: {err}") from None
     if not records:
         raise LogError(f"{path} holds a session header and no loop records: nothing to replay")
     names = header.get("observation") or []
+    if not isinstance(names, list):
+        raise LogError(f"{path}: the header's observation is no list of names")
     try:
         ix, iy = names.index("ball_x"), names.index("ball_y")
     except ValueError:
         raise LogError(f"{path}: the header's observation has no ball_x, ball_y") from None
+    env_id = header.get("env_id") or "a real table"
+    if not isinstance(env_id, str):
+        raise LogError(f"{path}: the header's env_id is {type(env_id).__name__}, not a string")
     try:
         rods = _rods(records)
-    except (AttributeError, TypeError, ValueError) as err:
+    except (AttributeError, TypeError, ValueError, OverflowError) as err:
         raise LogError(f"{path}: unreadable rods in the records ({err})") from None
     if not rods:
         raise LogError(f"{path}: its records name no rods")
     simulated = any(rec.get("truth") for rec in records)
-    env_id = header.get("env_id") or "a real table"
     recording = Recording(
         title=f"{env_id}: {path.name}",
         rods=rods,
@@ -144,7 +148,7 @@ def recording_from_session(path: str | Path) -> Recording:
             if truth.get("out"):
                 out_of_table = True
                 serve["events"].append((frame, "ball off the table"))
-        except (KeyError, IndexError, TypeError, ValueError, AttributeError) as err:
+        except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError) as err:
             raise LogError(f"{path}: line {number} is not a loop record ({err!r})") from None
     close_serve()
     t0 = recording.episodes[0].t[0]

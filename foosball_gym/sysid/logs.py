@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym import table
+from foosball_gym import table, user_json
 from foosball_gym.physics_options import PHYSICS_DEFAULTS, RANDOMISATION_BOUNDS, check_physics
 
 #: The environment options that make a simulated table's physics what it is: two simulated
@@ -142,8 +142,10 @@ def read_log(path: str | Path) -> PlayLog:
         if not line.strip():
             continue
         try:
-            record = json.loads(line)
-        except json.JSONDecodeError:
+            record = user_json.loads(line)
+        except ValueError as err:
+            if not isinstance(err, json.JSONDecodeError):
+                raise LogError(f"{name} line {number}: {err}") from None
             if cut_off and number == len(lines):
                 raise LogError(
                     f"{name} is truncated: its last line ({number}) was cut off while the "
@@ -197,8 +199,10 @@ def _header(name: str, line: str, cut_off: bool) -> dict[str, Any]:
     """The header of a log, checked."""
     not_a_log = f"{name} does not start with a session header: not a log of foosball play --log"
     try:
-        first = json.loads(line)
-    except json.JSONDecodeError:
+        first = user_json.loads(line)
+    except ValueError as err:
+        if not isinstance(err, json.JSONDecodeError):
+            raise LogError(f"{name} line 1: {err}") from None
         if cut_off:
             raise LogError(f"{name} is truncated: it was cut off in its header") from None
         raise LogError(not_a_log) from None

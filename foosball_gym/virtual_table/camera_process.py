@@ -99,6 +99,10 @@ class FrameBuffer:
         return None
 
 
+class CameraGone(OSError):
+    """The camera process ended while the table ran (killed, or crashed)."""
+
+
 class CameraProcess:
     """Renders scenes of a table with ``rods`` in a separate process, one at a time.
 
@@ -145,7 +149,10 @@ class CameraProcess:
             self._collect(block=False)
             if self._requested and not queue:
                 return
-            self._conn.send((stamp, list(positions), list(ball)))
+            try:
+                self._conn.send((stamp, list(positions), list(ball)))
+            except (BrokenPipeError, OSError):
+                raise self._gone() from None
             self._requested.append(stamp)
 
     def latest(
@@ -196,10 +203,25 @@ class CameraProcess:
             time.sleep(0.001)
 
     def _collect(self, block: bool, timeout: float = 0.0) -> None:
-        while self._requested and self._conn.poll(timeout if block else 0):
-            self._buffer.add(self._conn.recv())
-            self._requested.popleft()
-            block = False
+        try:
+            while self._requested and self._conn.poll(timeout if block else 0):
+                self._buffer.add(self._conn.recv())
+                self._requested.popleft()
+                block = False
+        except (EOFError, OSError):
+            raise self._gone() from None
+
+    def _gone(self) -> CameraGone:
+        self._process.join(timeout=1)
+        code = self._process.exitcode
+        how = (
+            "is still there but its pipe is closed"
+            if code is None
+            else f"was killed by {signal.Signals(-code).name}"
+            if code < 0
+            else f"exited with status {code}"
+        )
+        return CameraGone(f"the simulated table's camera process {how}: the table was stopped")
 
     def close(self) -> None:
         """Stop the process; safe to call twice."""

@@ -60,7 +60,12 @@ from foosball_gym.registration import interface_of, make_task
 from foosball_gym.sim import TableSim
 from foosball_gym.sysid.excitation import CALIBRATION_SERVE_S, calibration_serve, check_serves
 from foosball_gym.tasks.base import Start
-from foosball_gym.virtual_table.camera_process import KEPT_FRAMES, CameraProcess, FrameBuffer
+from foosball_gym.virtual_table.camera_process import (
+    KEPT_FRAMES,
+    CameraGone,
+    CameraProcess,
+    FrameBuffer,
+)
 from foosball_gym.virtual_table.drives import SimulatedDrives
 from foosball_gym.virtual_table.viewer_process import ViewerProcess
 
@@ -196,6 +201,7 @@ class SimulatedTable:
             raise ValueError(f"camera_latency_s must be 0 or more, got {camera_latency_s!r}")
         self.camera_latency = float(camera_latency_s)
         self._camera: CameraProcess | None = None
+        self._camera_lost: CameraGone | None = None
         # Enough frames for the latency to hold back: with fewer, none would ever be due.
         kept = KEPT_FRAMES + math.ceil(self.camera_latency / self.sim.control_dt)
         self._frames = FrameBuffer(kept)  # lock-step's frames, for their latency
@@ -300,8 +306,13 @@ class SimulatedTable:
                 self._waiting = False
                 self._ticked.notify_all()
                 stamp, scene = (self._serves, self.time), self.seen_scene()
-            if self._camera is not None:
-                self._camera.request(stamp, *scene)
+            if self._camera is not None and self._camera_lost is None:
+                try:
+                    self._camera.request(stamp, *scene)
+                except CameraGone as err:
+                    # The table moves on (the drives brake in its steps); the loop's next
+                    # read reports the camera gone.
+                    self._camera_lost = err
             next_tick += dt
             # After a stall (a debugger, a suspended process) time is not made up in a burst.
             if time.monotonic() > next_tick + dt:
@@ -375,6 +386,8 @@ class SimulatedTable:
             self._frames.add(((self._serves, self.time), self.frame()))
             (_, t), frame = self._frames.give(serve, upto) or (serve, None)
             return t, frame
+        if self._camera_lost is not None:
+            raise self._camera_lost
         # A frame from before the serve shows a ball that is no longer there.
         (_, t), frame = self._camera.latest(
             after=serve, upto=upto, patience=FRAME_PATIENCE * self.sim.control_dt

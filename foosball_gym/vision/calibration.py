@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Sequence
+from pathlib import Path
+from typing import BinaryIO
 
 import cv2
 import numpy as np
@@ -21,6 +24,20 @@ FIELD_MARKERS = np.array(
     ]
 )
 FIELD_HSV = ((40, 80, 40), (85, 255, 255))  # the green playing surface
+#: The most pixels a picture to calibrate from may have: beyond any table camera's (a
+#: 50-megapixel still), and checked in the file's header before decoding, since a file of a
+#: megabyte can decode to gigabytes.
+MAX_IMAGE_PIXELS = 50_000_000
+#: How a calibration must fit the field to be taken for one (:func:`check_field`): the field's
+#: corners this far (pixels, and share of the picture's larger side) inside the picture's
+#: edge; the field's sides, back on the table's plane, within this share of their true length;
+#: the corners reprojected within this share of the field's diagonal in the picture (and at
+#: least :data:`MIN_REPROJECTION_PX`).
+EDGE_MARGIN_PX = 2.0
+EDGE_MARGIN_SHARE = 0.005
+MAX_SIDE_ERROR = 0.05
+MAX_REPROJECTION_SHARE = 0.01
+MIN_REPROJECTION_PX = 2.0
 
 
 def calibrate_intrinsics(
@@ -62,6 +79,69 @@ def calibrate_intrinsics(
     assert size is not None  # every image sets it, and three or more were read
     rms, K, dist, _, _ = cv2.calibrateCamera(object_points, image_points, size, None, None)
     return K, dist.reshape(-1), float(rms)
+
+
+def image_size(path: str | Path) -> tuple[int, int]:
+    """A PNG, JPEG or BMP file's (width, height), from its header alone.
+
+    Raises:
+        ValueError: another format, or a header that does not say.
+    """
+    with open(path, "rb") as f:
+        head = f.read(32)
+        if head.startswith(b"\x89PNG\r\n\x1a\n") and head[12:16] == b"IHDR":
+            width, height = struct.unpack(">II", head[16:24])
+            return width, height
+        if head.startswith(b"BM") and len(head) >= 26:
+            width, height = struct.unpack("<ii", head[18:26])
+            return abs(width), abs(height)
+        if head.startswith(b"\xff\xd8"):
+            return _jpeg_size(f)
+    raise ValueError(f"{path}: not a PNG, JPEG or BMP picture")
+
+
+def _jpeg_size(f: BinaryIO) -> tuple[int, int]:
+    """The frame size in a JPEG's start-of-frame segment, walking the segments before it."""
+    f.seek(2)
+    while True:
+        marker = f.read(2)
+        while marker[:1] == b"\xff" and marker[1:2] == b"\xff":  # fill bytes
+            marker = marker[1:] + f.read(1)
+        if len(marker) < 2 or marker[0] != 0xFF:
+            break
+        kind = marker[1]
+        if kind in (0xD8, 0x01) or 0xD0 <= kind <= 0xD7:
+            continue  # markers without a length
+        raw = f.read(2)
+        if len(raw) < 2:
+            break
+        (length,) = struct.unpack(">H", raw)
+        if 0xC0 <= kind <= 0xCF and kind not in (0xC4, 0xC8, 0xCC):
+            frame = f.read(5)
+            if len(frame) < 5:
+                break
+            height, width = struct.unpack(">HH", frame[1:5])
+            return width, height
+        f.seek(length - 2, 1)
+    raise ValueError(f"{getattr(f, 'name', 'the file')}: a JPEG whose header gives no size")
+
+
+def read_image(path: str | Path, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray:
+    """A picture to calibrate from, BGR, its size checked in its header before it is decoded.
+
+    Raises:
+        ValueError: not a PNG, JPEG or BMP, more than ``max_pixels`` pixels, or not decodable.
+    """
+    width, height = image_size(path)
+    if width * height > max_pixels:
+        raise ValueError(
+            f"{path} is {width} x {height} pixels ({width * height / 1e6:.0f} megapixels); a "
+            f"picture to calibrate from may have at most {max_pixels / 1e6:.0f} megapixels"
+        )
+    image = cv2.imread(str(path))
+    if image is None:
+        raise ValueError(f"cannot read an image from {path}")
+    return image
 
 
 def find_field_corners(frame: np.ndarray, home_side: str = "left") -> np.ndarray:
@@ -156,8 +236,59 @@ def calibrate_extrinsics(
     return CameraCalibration(K, dist, rvec, tvec)
 
 
+def check_field(
+    corners: np.ndarray, calibration: CameraCalibration, shape: tuple[int, ...]
+) -> None:
+    """Refuse a calibration that does not look like one of the table (see the constants above
+    :func:`calibrate_intrinsics`): the field must lie whole inside the picture, the camera
+    above it, its sides on the table's plane as long as the field's, and the pose must
+    reproject the corners where they were found.
+
+    Raises:
+        ValueError: saying which of these failed, and by how much.
+    """
+    height, width = shape[:2]
+    corners = np.asarray(corners, dtype=float).reshape(4, 2)
+    margin = max(EDGE_MARGIN_PX, EDGE_MARGIN_SHARE * max(width, height))
+    inside = (corners >= margin).all() and (corners[:, 0] <= width - 1 - margin).all()
+    if not inside or not (corners[:, 1] <= height - 1 - margin).all():
+        raise ValueError(
+            "the green area reaches the picture's edge: the whole field, with a margin "
+            "around it, must be in view (is this a picture of the table?)"
+        )
+    if not calibration.centre[2] > 0:
+        raise ValueError("the camera comes out below the table: that is not the field")
+    on_table = calibration.pixel_to_table(corners, z=0.0)
+    sides = np.linalg.norm(on_table - np.roll(on_table, -1, axis=0), axis=1)
+    true = 2 * np.array([table.FIELD_HALF_LENGTH, table.FIELD_HALF_WIDTH] * 2)
+    errors = np.abs(sides / true - 1)
+    if not errors.max() <= MAX_SIDE_ERROR:
+        raise ValueError(
+            f"the green quadrilateral is no field of {true[0]:g} x {true[1]:g} m seen by this "
+            f"camera: its sides come out {', '.join(f'{v:.3f}' for v in sides)} m (off by up "
+            f"to {100 * errors.max():.0f} %, at most {100 * MAX_SIDE_ERROR:g} %)"
+        )
+    reprojected = calibration.project(FIELD_MARKERS)
+    rms = float(np.sqrt(((reprojected - corners) ** 2).sum(axis=1).mean()))
+    diagonal = float(np.linalg.norm(corners[2] - corners[0]))
+    bound = max(MIN_REPROJECTION_PX, MAX_REPROJECTION_SHARE * diagonal)
+    if not rms <= bound:
+        raise ValueError(
+            f"the field's corners reproject {rms:.1f} px from where they were found (at most "
+            f"{bound:.1f} px): the green area is not the field's shape, or camera.K is wrong"
+        )
+
+
 def calibrate_from_frame(
     frame: np.ndarray, K: np.ndarray, dist: np.ndarray, home_side: str = "left"
 ) -> CameraCalibration:
-    """The camera's pose from one frame of the field, with known intrinsics."""
-    return calibrate_extrinsics(find_field_corners(frame, home_side), K, dist)
+    """The camera's pose from one frame of the field, with known intrinsics.
+
+    Raises:
+        ValueError: no field found, or a calibration that does not look like the table's
+            (:func:`check_field`).
+    """
+    corners = find_field_corners(frame, home_side)
+    calibration = calibrate_extrinsics(corners, K, dist)
+    check_field(corners, calibration, frame.shape)
+    return calibration

@@ -1,7 +1,9 @@
 """Where frames come from: a camera, a video file, or any function (the simulator's renderer).
 
 Every source has ``read() -> (timestamp_s, frame_bgr) | None`` (None at the end of a stream)
-and ``close()``. Frames are BGR, as OpenCV gives them.
+and ``close()``. Frames are BGR, as OpenCV gives them. A source that counts its frames itself
+has a ``frame_number``: the number of the frame ``read`` last gave, which changes with every
+new picture (the play loop tells a frozen camera by it, and by the pixels where there is none).
 """
 
 from __future__ import annotations
@@ -58,12 +60,17 @@ class OpenCVSource:
         self._is_file = isinstance(self.source, str)
         self._fps = self._cap.get(cv2.CAP_PROP_FPS) or 60.0
         self._frames = 0
+        # A file's frames are numbered by their place in it (a still scene's are alike); a
+        # camera through OpenCV gives no count of its own.
+        self.frame_number: int | None = None
 
     def read(self) -> tuple[float, np.ndarray] | None:
         ok, frame = self._cap.read()
         if not ok:
             return None
         self._frames += 1
+        if self._is_file:
+            self.frame_number = self._frames
         # A file's frames are timed by its frame rate; a camera's by when they arrive.
         t = self._frames / self._fps if self._is_file else time.monotonic()
         return t, frame
@@ -86,10 +93,15 @@ class CallableSource:
     ) -> None:
         self.render = render
         self.clock = clock
+        # Every call renders afresh: a still scene gives the same pixels, and is no frozen camera.
+        self.frame_number = 0
 
     def read(self) -> tuple[float, np.ndarray] | None:
         t, frame = self.clock(), self.render()
-        return None if frame is None else (t, cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+        if frame is None:
+            return None
+        self.frame_number += 1
+        return t, cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)
 
     def close(self) -> None:
         pass

@@ -12,14 +12,17 @@
   const X = T.pocket_back_x + T.wall;
   const Y = T.field_half_width + T.wall;
   const HOLD_S = 0.6; // a finished episode stays on the screen this long when playing on
-  const TRAIL_S = 1.0; // the track shown without "whole track"
+  // The track shown unless "whole track" is asked for: a long match's whole track is a tangle.
+  const TRAIL_S = 2.0;
   const TRACK_STYLE = {
     ball: { colour: "#ff8c00", label: "true ball (the simulator's)" },
     estimate: { colour: "#1565ff", label: "estimate the policy saw (camera + Kalman filter)" },
     measured: { colour: "#d000c8", label: "camera detection" },
   };
 
-  const state = { episode: 0, frame: 0, playing: false, speed: 1, playhead: 0, hold: 0 };
+  const state = {
+    episode: 0, frame: 0, playing: false, speed: 1, playhead: 0, hold: 0, trackFrom: 0,
+  };
   let values = null; // channel name -> Float64Array over all frames
   let scale = 1; // canvas pixels per metre
   let lastTick = null;
@@ -203,6 +206,7 @@
       const t = values.t;
       while (from < i && t[i] - t[from] > TRAIL_S) from++;
     }
+    state.trackFrom = from - episode.start;
     for (const name of ["measured", "estimate", "ball"]) {
       if (data.tracks.includes(name)) drawTrack(name, from, i);
     }
@@ -353,6 +357,8 @@
     value: (name) => value(name, data.episodes[state.episode].start + state.frame),
     get episode() { return state.episode; },
     get frame() { return state.frame; },
+    // The episode's frame the tracks are drawn from.
+    get trackFrom() { return state.trackFrom; },
     get playing() { return state.playing; },
     get speed() { return state.speed; },
   };

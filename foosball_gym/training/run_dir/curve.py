@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -99,21 +100,37 @@ def _plain(value: Any) -> Any:
 
 def read_curve(csv_path: Path) -> list[dict[str, float]]:
     """The rows of ``eval.csv`` as numbers; ValueError naming the file and the row where it
-    is damaged."""
-    with Path(csv_path).open() as f:
-        reader = csv.DictReader(f)
-        if reader.fieldnames is None:
-            return []
-        missing = [k for k in ("timesteps", "wall_seconds") if k not in reader.fieldnames]
-        if missing:
-            raise ValueError(f"{csv_path} is not an evaluation curve: it has no {missing[0]}")
-        rows = []
-        for line, row in enumerate(reader, start=2):
-            try:
-                rows.append({k: float(v) for k, v in row.items() if k is not None})
-            except (TypeError, ValueError):
-                raise ValueError(f"{csv_path}, line {line}: not a row of numbers") from None
-        return rows
+    is damaged: a value that is no number, or a time (``timesteps``, ``wall_seconds``) that is
+    no finite one, which no later step could be placed after (a resumed run's cut would lose
+    that row without a word)."""
+    try:
+        with Path(csv_path).open(encoding="utf-8", newline="") as f:
+            return _rows(csv_path, csv.DictReader(f))
+    except UnicodeDecodeError as err:
+        raise ValueError(
+            f"{csv_path} is not an evaluation curve: not UTF-8 text (byte {err.start})"
+        ) from None
+
+
+def _rows(csv_path: Path, reader: csv.DictReader) -> list[dict[str, float]]:
+    if reader.fieldnames is None:
+        return []
+    missing = [k for k in ("timesteps", "wall_seconds") if k not in reader.fieldnames]
+    if missing:
+        raise ValueError(f"{csv_path} is not an evaluation curve: it has no {missing[0]}")
+    rows = []
+    for line, row in enumerate(reader, start=2):
+        try:
+            values = {k: float(v) for k, v in row.items() if k is not None}
+        except (TypeError, ValueError):
+            raise ValueError(f"{csv_path}, line {line}: not a row of numbers") from None
+        for key in ("timesteps", "wall_seconds"):
+            if not math.isfinite(values[key]):
+                raise ValueError(
+                    f"{csv_path}, line {line}: its {key} is {row[key]}, not a finite number"
+                )
+        rows.append(values)
+    return rows
 
 
 def plot_curve(csv_path: Path, png_path: Path, title: str) -> None:

@@ -37,6 +37,8 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+from foosball_gym import user_json
+
 CONFIG_FILE = "config.json"
 MODEL_FILE = "model.zip"
 NORM_FILE = "vecnormalize.json"
@@ -74,8 +76,8 @@ def read_json(path: Path, kind: type, what: str) -> Any:
     """The JSON in ``path``, which must be a ``kind`` (dict or list); ValueError in one line
     naming the file and ``what`` it should hold otherwise."""
     try:
-        value = json.loads(Path(path).read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        value = user_json.loads(Path(path).read_text(encoding="utf-8"))
+    except ValueError as err:
         raise ValueError(f"{path} is not valid JSON ({err}): it should hold {what}") from None
     if not isinstance(value, kind):
         raise ValueError(

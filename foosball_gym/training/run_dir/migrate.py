@@ -20,14 +20,19 @@ from foosball_gym.training.run_dir.files import (
     write_latest,
 )
 from foosball_gym.training.run_dir.lock import run_lock
-from foosball_gym.training.run_dir.storage import SERIALIZED, load_pickled_norm, strip_pickles
+from foosball_gym.training.run_dir.storage import (
+    SERIALIZED,
+    load_pickled_norm,
+    read_entry,
+    strip_pickles,
+)
 
 
 def _holds_pickles(zip_path: Path) -> bool:
     import zipfile
 
     with zipfile.ZipFile(zip_path) as archive:
-        data = json.loads(archive.read("data")) if "data" in archive.namelist() else {}
+        data = json.loads(read_entry(archive, "data")) if "data" in archive.namelist() else {}
     return any(isinstance(v, dict) and SERIALIZED in v for v in data.values())
 
 

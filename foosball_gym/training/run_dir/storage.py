@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from foosball_gym import user_json
 from foosball_gym.training.run_dir.files import (
     LEGACY_NORM_FILE,
     MODEL_FILE,
@@ -142,8 +143,8 @@ class NormStats:
     def load(cls, path: Path) -> NormStats:
         """Read statistics :meth:`save` wrote; ValueError naming what is wrong otherwise."""
         try:
-            data = json.loads(Path(path).read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as err:
+            data = user_json.loads(Path(path).read_text(encoding="utf-8"))
+        except ValueError as err:
             raise ValueError(f"{path} is not valid JSON: {err}") from None
         return cls.from_dict(data, str(path))
 
@@ -229,6 +230,25 @@ def check_declared_size(archive: zipfile.ZipFile, where: str, limit: int) -> Non
         )
 
 
+#: How much of an entry is inflated at a time (:func:`read_entry`).
+READ_CHUNK = 2**20
+
+
+def read_entry(archive: zipfile.ZipFile, name: str | zipfile.ZipInfo) -> bytes:
+    """A zip entry's bytes, inflated :data:`READ_CHUNK` at a time.
+
+    ``ZipFile.read`` inflates all of an entry's compressed bytes in one go (up to 2 GiB) and
+    only then cuts them to the size the entry declares: an entry that declares a few bytes and
+    inflates to gigabytes took gigabytes of memory before its check sum refused it. Read a
+    megabyte at a time, it is refused at the size it declared.
+    """
+    out = bytearray()
+    with archive.open(name) as entry:
+        while chunk := entry.read(READ_CHUNK):
+            out += chunk
+    return bytes(out)
+
+
 def check_torch_file(path: Path, limit: int | None = None) -> None:
     """:func:`check_declared_size` for a file ``torch.save`` wrote (a zip of its own), against
     :data:`MODEL_SIZE_LIMIT` unless ``limit`` is given."""
@@ -281,11 +301,11 @@ def read_model_zip(
             check_declared_size(archive, "it", limit)
             names = archive.namelist()
             try:
-                data = json.loads(archive.read("data")) if "data" in names else {}
+                data = json.loads(read_entry(archive, "data")) if "data" in names else {}
             except (json.JSONDecodeError, UnicodeDecodeError) as err:
                 raise ValueError(f"its data entry is not JSON ({err})") from None
             # Every entry checked before any is read as tensors.
-            pth = {name: archive.read(name) for name in names if name.endswith(".pth")}
+            pth = {name: read_entry(archive, name) for name in names if name.endswith(".pth")}
             for name, content in pth.items():
                 _check_pth(content, f"its entry {name}", limit)
             params: dict[str, Any] = {}
@@ -321,7 +341,7 @@ def zip_statistics(path: Path) -> tuple[bool, NormStats | None]:
                 return False, None
             if archive.getinfo(ZIP_RECORD).file_size > 2**20:
                 raise ValueError(f"{where} is too large to be a normalisation record")
-            record = json.loads(archive.read(ZIP_RECORD))
+            record = json.loads(read_entry(archive, ZIP_RECORD))
     except (zipfile.BadZipFile, zlib.error, EOFError) as err:
         raise ValueError(f"it is not a zip file, or a damaged one ({err})") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
@@ -346,7 +366,7 @@ def _rewritten(content: bytes, extra: dict[str, bytes] | None = None) -> bytes:
             for info in archive.infolist():
                 if info.filename in extra:
                     continue
-                entry = archive.read(info)
+                entry = read_entry(archive, info)
                 if info.filename == "data":
                     data = json.loads(entry)
                     for value in data.values():

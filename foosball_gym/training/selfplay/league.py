@@ -32,6 +32,7 @@ from foosball_gym.training.run_dir.files import (
     read_json,
     read_latest,
 )
+from foosball_gym.training.run_dir.storage import read_entry
 from foosball_gym.training.selfplay.history import read_history, snapshot_file
 from foosball_gym.training.selfplay.matches import Arena, PairResult, Player, play_pair
 
@@ -281,7 +282,7 @@ def _final_timesteps(run_dir: Path) -> int | None:
         try:
             with zipfile.ZipFile(model) as archive:
                 # SB3's "data" member is JSON: read without unpickling anything.
-                return int(json.loads(archive.read("data"))["num_timesteps"])
+                return int(json.loads(read_entry(archive, "data"))["num_timesteps"])
         except (OSError, KeyError, ValueError, zipfile.BadZipFile):
             pass
     latest = read_latest(run_dir)
