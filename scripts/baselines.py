@@ -58,7 +58,9 @@ class Task:
 
 
 TASKS = {
-    "block": Task("Foosball-Block-v0", "builtin:block-scratch", (100_000, 300_000, 1_000_000)),
+    "block": Task(
+        "Foosball-Block-v0", "builtin:block-scratch", (100_000, 200_000, 300_000, 500_000)
+    ),
     "score-resting": Task(
         "Foosball-Score-v0", "builtin:score-resting-scratch", (300_000, 1_000_000, 3_000_000)
     ),
@@ -269,13 +271,14 @@ def _plot(table: dict[tuple[str, int], dict], rows: list[dict[str, str]], images
         ax.fill_between(steps, [100 * c["low"] for c in cells], [100 * c["high"] for c in cells],
                         alpha=0.25, label="95 % stratified bootstrap CI")  # fmt: skip
         ax.plot(steps, [100 * c["iqm"] for c in cells], "o-", label="IQM over seeds")
-        for seed in sorted({r["seed"] for r in rows if r["task"] == task}):
+        for n, seed in enumerate(sorted({r["seed"] for r in rows if r["task"] == task})):
             mine = sorted(
                 (int(r["env_steps"]), 100 * float(r["success"]))
                 for r in rows
                 if r["task"] == task and r["seed"] == seed
             )
-            ax.plot(*zip(*mine), color="grey", lw=0.7, alpha=0.6)
+            label = "each seed" if n == 0 else None
+            ax.plot(*zip(*mine), color="grey", lw=0.7, alpha=0.6, label=label)
         ax.set_xscale("log")
         ax.set_xlabel("env steps")
         ax.set_ylabel(f"success, {EVAL_EPISODES} episodes (%)")

@@ -82,3 +82,26 @@ def test_a_failure_in_a_worker_is_raised_in_the_main_process_and_the_worker_live
 def test_more_workers_than_environments_is_refused_in_one_line() -> None:
     with pytest.raises(ValueError, match=r"workers must lie in \[1, 2\]"):
         BatchedSubprocVecEnv([lambda: __import__("gymnasium").make(ENV)] * 2, workers=3)
+
+
+def test_a_run_trains_the_same_policy_with_its_environments_batched_or_in_process(
+    tmp_path,
+) -> None:
+    import torch
+
+    from foosball_gym.training.config import TrainConfig
+    from foosball_gym.training.run_dir.storage import read_model_zip
+    from foosball_gym.training.sb3.trainer import train
+
+    weights = {}
+    for vec_env in ("dummy", "batched"):
+        config = TrainConfig(
+            ENV, timesteps=512, n_envs=4, n_steps=64, batch_size=128, n_epochs=2, seed=5,
+            vec_env=vec_env, eval_freq=10_000, eval_episodes=1, checkpoint_freq=10_000,
+        )  # fmt: skip
+        train(config, tmp_path / vec_env)
+        _, params, _ = read_model_zip(tmp_path / vec_env / "model.zip")
+        weights[vec_env] = params["policy"]
+    assert weights["dummy"].keys() == weights["batched"].keys()
+    for name, value in weights["dummy"].items():
+        assert torch.equal(value, weights["batched"][name]), name

@@ -92,10 +92,22 @@ SHIPPED_TASKS = [
 ]
 
 
-def test_the_shipped_files_are_one_per_shipped_task():
+RECIPES = ["block-scratch"]
+
+
+def test_the_shipped_files_are_one_per_shipped_task_and_the_from_scratch_recipes():
     # A new task needs no settings file (docs/add-a-task.md); one it ships names a registered id.
     assert set(SHIPPED_TASKS) <= set(ENV_IDS)
-    assert shipped_configs() == SHIPPED_TASKS
+    assert shipped_configs() == sorted(SHIPPED_TASKS + RECIPES)
+
+
+@pytest.mark.parametrize("name", RECIPES)
+def test_a_from_scratch_recipe_has_no_demonstrations_teacher_or_residual(name):
+    config = load_train_config(f"builtin:{name}")  # checked with TrainConfig.check
+    assert config_path(f"builtin:{name}").read_text().startswith(f"# {config.env_id}")
+    assert config.pretrain_episodes == 0 and config.teacher_steps == 0
+    assert not config.env_kwargs.get("residual")
+    assert config.self_play is False
 
 
 @pytest.mark.parametrize("env_id", SHIPPED_TASKS)
@@ -130,6 +142,11 @@ BLOCK = "env_id: Foosball-Block-v0\n"
         (BLOCK + "net_arch: 64\n", [], "net_arch: takes a list of whole numbers, got 64"),
         (BLOCK + "target_kl: yes\n", [], "target_kl: takes a number or null, got True"),
         (BLOCK + "timesteps: 0\n", [], "timesteps must be at least 1, got 0"),
+        (
+            BLOCK + "n_steps: 64\nn_envs: 8\nbatch_size: 5000\n",
+            [],
+            "batch_size 5000 is more than a rollout holds: n_steps x n_envs = 64 x 8 = 512",
+        ),
         (BLOCK + "algo: dqn\n", [], "algo: unknown algorithm 'dqn'; allowed: ppo, sac"),
         (BLOCK + "target_success: 2.0\n", [], "target_success must lie in (0, 1]"),
         (BLOCK + "self_play: true\n", [], "self_play: Foosball-Block-v0 has no opponent"),

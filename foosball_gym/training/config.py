@@ -193,6 +193,14 @@ class TrainConfig:
                 "PPO needs n_steps x n_envs and batch_size of at least 2, got "
                 f"{self.n_steps} x {self.n_envs} and {self.batch_size}"
             )
+        rollout = self.n_steps * self.n_envs
+        if self.algo == "ppo" and self.batch_size > rollout:
+            # SB3 would train on minibatches of the whole rollout and only warn.
+            raise ValueError(
+                f"batch_size {self.batch_size} is more than a rollout holds: n_steps x n_envs = "
+                f"{self.n_steps} x {self.n_envs} = {rollout}; give a batch_size of at most "
+                f"{rollout}, or more n_steps or n_envs"
+            )
         if not self.net_arch or any(int(n) < 1 for n in self.net_arch):
             raise ValueError(f"net_arch must be layer sizes of at least 1, got {self.net_arch}")
         # Written `not x > 0` and alike, so that NaN fails too.
