@@ -30,7 +30,7 @@ SOURCES = [
 
 def commands(text: str) -> str:
     """``text`` with shell continuations (and the string joins of a Python message) undone."""
-    text = re.sub(r"\\\n\s*", " ", text)
+    text = re.sub(r"\s*\\\n\s*", " ", text)
     return re.sub(r'["\']\n\s*["\']', "", text)
 
 

@@ -281,13 +281,16 @@ def test_a_self_play_run_resumed_after_a_kill_keeps_only_generations_it_goes_on_
     with pytest.raises(KeyboardInterrupt):
         train(config, run, callbacks=[At(257, killed, past_checkpoint)])
     before = read_history(history)
-    late = [r["generation"] for r in before if r["timesteps"] > 256]
+    # The kill lands at the first generation past 256 steps, after the checkpoint of 256 or,
+    # where learning made none until later, of 512: the run goes on from the last of them.
+    latest = json.loads((run / "checkpoints" / "latest.json").read_text())["timesteps"]
+    late = [r["generation"] for r in before if r["timesteps"] > latest]
     assert late
 
     assert main(["train", "--resume", str(run), "--no-progress"]) == 0
     after = read_history(history)
     # Kept: the generations up to the checkpoint; then those the resumed run made, numbered on.
-    kept = [r for r in before if r["timesteps"] <= 256]
+    kept = [r for r in before if r["timesteps"] <= latest]
     assert after[: len(kept)] == kept
     steps = [r["timesteps"] for r in after]
     assert steps == sorted(steps)
@@ -295,7 +298,7 @@ def test_a_self_play_run_resumed_after_a_kill_keeps_only_generations_it_goes_on_
     assert generations == list(range(len(after)))
     for g in generations:
         assert snapshot_file(run / "selfplay", g).is_file()
-    lost = run / "lost" / "after_0000000256" / "selfplay"
+    lost = run / "lost" / f"after_{latest:010d}" / "selfplay"
     assert [r["generation"] for r in read_history(lost / "history.json")] == late
     assert all((lost / snapshot_file(lost, g).name).is_file() for g in late)
 

@@ -435,7 +435,7 @@ sys.exit(main(sys.argv[1:]))
     done = run_without_torch(code, "eval", "builtin:block", cwd=tmp_path)
     assert done.returncode == 2, done.stderr
     assert done.stderr.startswith("foosball eval: error:"), done.stderr
-    assert "foosball_gym[train]" in done.stderr and "Traceback" not in done.stderr
+    assert 'pip install -e ".[train]"' in done.stderr and "Traceback" not in done.stderr
 
 
 def test_every_package_is_listed_for_installation():

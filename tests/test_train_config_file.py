@@ -107,7 +107,7 @@ def test_a_from_scratch_recipe_has_no_demonstrations_teacher_or_residual(name):
     assert config_path(f"builtin:{name}").read_text().startswith(f"# {config.env_id}")
     assert config.pretrain_episodes == 0 and config.teacher_steps == 0
     assert not config.env_kwargs.get("residual")
-    assert config.self_play is False
+    assert not config.self_play
 
 
 @pytest.mark.parametrize("env_id", SHIPPED_TASKS)
@@ -143,9 +143,9 @@ BLOCK = "env_id: Foosball-Block-v0\n"
         (BLOCK + "target_kl: yes\n", [], "target_kl: takes a number or null, got True"),
         (BLOCK + "timesteps: 0\n", [], "timesteps must be at least 1, got 0"),
         (
-            BLOCK + "n_steps: 64\nn_envs: 8\nbatch_size: 5000\n",
+            BLOCK + "batch_size: 5000\n",
             [],
-            "batch_size 5000 is more than a rollout holds: n_steps x n_envs = 64 x 8 = 512",
+            "batch_size 5000 is more than a rollout holds: n_steps x n_envs = 128 x 8 = 1024",
         ),
         (BLOCK + "algo: dqn\n", [], "algo: unknown algorithm 'dqn'; allowed: ppo, sac"),
         (BLOCK + "target_success: 2.0\n", [], "target_success must lie in (0, 1]"),

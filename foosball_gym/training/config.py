@@ -194,8 +194,10 @@ class TrainConfig:
                 f"{self.n_steps} x {self.n_envs} and {self.batch_size}"
             )
         rollout = self.n_steps * self.n_envs
-        if self.algo == "ppo" and self.batch_size > rollout:
-            # SB3 would train on minibatches of the whole rollout and only warn.
+        default_batch = next(f.default for f in fields(self) if f.name == "batch_size")
+        if self.algo == "ppo" and default_batch != self.batch_size > rollout:
+            # SB3 trains on the whole rollout where a minibatch does not fit, as the default
+            # does with few environments; a minibatch asked for is meant to fit.
             raise ValueError(
                 f"batch_size {self.batch_size} is more than a rollout holds: n_steps x n_envs = "
                 f"{self.n_steps} x {self.n_envs} = {rollout}; give a batch_size of at most "

@@ -238,6 +238,7 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
             policy=rllib, env_id=rllib.env_id, env_kwargs=rllib.env_kwargs, source=str(path)
         )
     env_id: str | None
+    note: str | None = None
     zoo = is_zoo_run(path)
     if zoo:
         try:
@@ -247,7 +248,6 @@ def load_policy(spec: str | Path, trust: bool = False) -> LoadedPolicy:
         zip_path, norm, run_dir, config = found.model, found.norm, found.folder, None
         env_id, env_kwargs = found.env_id, found.env_kwargs
     else:
-        note = None
         if path.is_dir() and not (path / MODEL_FILE).exists():
             zip_path, note = unfinished_run_model(path)
             run_dir = zip_path.parent
