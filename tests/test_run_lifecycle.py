@@ -306,6 +306,42 @@ def test_a_self_play_run_resumed_after_a_kill_keeps_only_generations_it_goes_on_
 # -- a full or read-only disk ------------------------------------------------------------
 
 
+# TensorBoard's writer writes from a thread of its own; a full disk fails it there.
+FULL_TENSORBOARD = """
+import errno, sys
+import tensorboard.summary.writer.record_writer as record_writer
+
+def full(self, data):
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+record_writer.RecordWriter.write = full
+from foosball_gym.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_a_full_disk_under_tensorboard_on_resume_is_one_line_and_leaves_no_empty_log(tmp_path):
+    run = tmp_path / "run"
+    argv = ["train", "Foosball-Block-v0", "--timesteps", "128", "--eval-freq", "64"]
+    assert main([*argv, "--out", str(run), *SMALL]) == 0
+    logs_before = sorted(p.relative_to(run) for p in (run / "tb").rglob("*"))
+    done = subprocess.run(
+        [sys.executable, "-c", FULL_TENSORBOARD, "train", "--resume", str(run)]
+        + ["--timesteps", "256", "--no-progress"],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+        timeout=300,
+    )
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in done.stderr, done.stderr
+    assert "No space left on device" in lines[0]
+    assert not [p for p in (run / "tb").rglob("*") if p.is_file() and p.stat().st_size == 0]
+    # What the first sitting logged is kept.
+    assert sorted(p.relative_to(run) for p in (run / "tb").rglob("*")) == logs_before
+
+
 def test_a_full_disk_is_one_line_leaves_no_temporary_file_and_the_run_resumes(
     tmp_path, capsys, monkeypatch, fixed_evaluations
 ):

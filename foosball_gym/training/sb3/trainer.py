@@ -6,11 +6,14 @@ are listed in :mod:`foosball_gym.training.run_dir.files`.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import threading
 import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
@@ -165,6 +168,36 @@ def train(
         return _train(config, out, continuing, progress_bar, callbacks, timesteps is not None)
 
 
+def _quiet_tensorboard_writer_failures(args: Any) -> None:
+    # TensorBoard's writer thread stores a failed write (a full disk) and raises it in the
+    # training thread at the next write, which the command reports in one line; the thread's
+    # own traceback would only repeat it, after that line.
+    if isinstance(args.exc_value, OSError) and type(args.thread).__name__ == "_AsyncWriterThread":
+        return
+    _previous_excepthook(args)
+
+
+_previous_excepthook = threading.excepthook
+threading.excepthook = _quiet_tensorboard_writer_failures
+
+
+def _close_tensorboard(model: Any, tb_dir: Path) -> None:
+    """Close the run's TensorBoard writer after a storage failure, and remove the event files
+    it left empty (a full disk leaves them at 0 bytes) with the folders they leave empty."""
+    for output in getattr(getattr(model, "_logger", None), "output_formats", []):
+        with contextlib.suppress(OSError):
+            output.close()
+    if not tb_dir.is_dir():
+        return
+    for events in tb_dir.glob("*/events.out.tfevents.*"):
+        with contextlib.suppress(OSError):
+            if events.stat().st_size == 0:
+                events.unlink()
+    for folder in tb_dir.iterdir():
+        with contextlib.suppress(OSError):
+            folder.rmdir()  # only where nothing is left in it
+
+
 def _train(
     config: TrainConfig,
     out: Path,
@@ -274,6 +307,9 @@ def _train(
             evaluations.init_callback(model)  # a last point for the curve at the final timestep
             evaluations.run_eval()
         save_model(model, out / MODEL_FILE)
+    except OSError:
+        _close_tensorboard(model, out / TB_DIR)
+        raise
     finally:
         venv.close()
     return TrainResult(
