@@ -477,3 +477,16 @@ def test_an_error_writing_a_run_file_names_it(tmp_path, monkeypatch):
         run_files.atomic_write_text(target, "{}")
     assert err.value.filename == str(target) and err.value.errno == errno.ENOSPC
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["[" * 100_000 + "]" * 100_000, '{"env_id": "Foosball-Block-v0", "seed": ' + "9" * 5000 + "}"],
+)
+def test_load_policy_refuses_a_hostile_config_json_with_its_one_line_error(tmp_path, text):
+    from foosball_gym.training.loading import ModelLoadError, builtin_path, load_policy
+
+    shutil.copy(builtin_path("block") / "model.zip", tmp_path / "model.zip")
+    (tmp_path / "config.json").write_text(text)
+    with pytest.raises(ModelLoadError, match="config.json is not valid JSON"):
+        load_policy(tmp_path)

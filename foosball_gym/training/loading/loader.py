@@ -7,7 +7,6 @@ algorithm.
 
 from __future__ import annotations
 
-import json
 import warnings
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -16,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from foosball_gym import user_json
 from foosball_gym.policy_io.task import residual_action, residual_scale
 from foosball_gym.training.loading.recurrent import RecurrentSnapshot
 from foosball_gym.training.loading.rl_zoo import find_zoo_run, is_zoo_run
@@ -419,8 +419,8 @@ def _find_config(run_dir: Path) -> dict[str, Any] | None:
     for candidate in (run_dir / CONFIG_FILE, run_dir.parent / CONFIG_FILE):
         if candidate.exists():
             try:
-                config = json.loads(candidate.read_text())
-            except (json.JSONDecodeError, UnicodeDecodeError) as err:
+                config = user_json.loads(candidate.read_text())
+            except (ValueError, UnicodeDecodeError) as err:
                 raise ModelLoadError(f"{candidate} is not valid JSON: {err}") from None
             if not isinstance(config, dict):
                 raise ModelLoadError(
