@@ -54,9 +54,7 @@ def run(args: argparse.Namespace) -> int:
 
         from foosball_gym.play.stack import calibrate_table
     except ImportError as err:
-        raise CliError(
-            f'{err}; install the hardware extra: pip install "foosball_gym[hardware]"'
-        ) from None
+        raise CliError(f'{err}; install the hardware extra: pip install -e ".[hardware]"') from None
     from foosball_gym.hardware.config import ConfigError, load_config, save_config
     from foosball_gym.vision import OpenCVSource
     from foosball_gym.vision.calibration import read_image

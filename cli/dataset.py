@@ -31,7 +31,7 @@ def add_parser(subparsers: Any) -> None:
         "Minari dataset for imitation learning and offline RL: observations, actions, rewards, "
         "ends and every step's info. Load it with minari.load_dataset(DATASET_ID) (setting "
         "MINARI_DATASETS_PATH to --data-path where one is given). Needs the datasets extra: "
-        'pip install "foosball_gym[datasets]".',
+        'pip install -e ".[datasets]".',
     )
     p.add_argument("target", help="MODEL, or ENV_ID with --policy scripted")
     p.add_argument(

@@ -240,9 +240,7 @@ def run(args: argparse.Namespace) -> int:
         from foosball_gym.play.stack import play_real, play_sim
         from foosball_gym.play.termination import Terminated, catch_termination
     except ImportError as err:
-        raise CliError(
-            f'{err}; install the hardware extra: pip install "foosball_gym[hardware]"'
-        ) from None
+        raise CliError(f'{err}; install the hardware extra: pip install -e ".[hardware]"') from None
     from foosball_gym.hardware.config import ConfigError, load_config
     from foosball_gym.hardware.safety import SafetyError
     from foosball_gym.registration import task_interface

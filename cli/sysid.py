@@ -9,7 +9,7 @@ from typing import Any
 
 from .common import CliError, check_writable
 
-EXTRA = 'install the sysid extra: pip install "foosball_gym[sysid]"'
+EXTRA = 'install the sysid extra: pip install -e ".[sysid]"'
 
 
 def add_parser(subparsers: Any) -> None:
@@ -120,7 +120,7 @@ def _require(module: str, option: str, extra: str) -> None:
     try:
         importlib.import_module(module)
     except ImportError:
-        raise ImportError(f'{option} needs {module}: pip install "foosball_gym[{extra}]"') from None
+        raise ImportError(f'{option} needs {module}: pip install -e ".[{extra}]"') from None
 
 
 def _check_plot_format(path: str) -> None:

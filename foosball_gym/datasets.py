@@ -38,7 +38,7 @@ def require_datasets_extra() -> None:
     if missing:
         raise ImportError(
             f"recording a dataset needs Minari with h5py and JAX ({', '.join(missing)} "
-            'missing); install them with: pip install "foosball_gym[datasets]"'
+            'missing); install them with: pip install -e ".[datasets]"'
         )
 
 

@@ -440,7 +440,7 @@ class _Mp4Writer(_VideoWriter):
         except ImportError as err:
             raise ImportError(
                 "recording an .mp4 video needs OpenCV, which the train and hardware extras "
-                'install: pip install "foosball_gym[train]"'
+                'install: pip install -e ".[train]"'
             ) from err
         super().__init__(path, fps, stride)
         self._cv2 = cv2
@@ -483,7 +483,7 @@ class _GifWriter(_VideoWriter):
         except ImportError as err:
             raise ImportError(
                 "recording a .gif needs Pillow, which the train extra installs with "
-                'matplotlib: pip install "foosball_gym[train]"'
+                'matplotlib: pip install -e ".[train]"'
             ) from err
         super().__init__(path, fps, stride)
         self._image = Image

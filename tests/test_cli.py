@@ -17,11 +17,11 @@ from foosball_gym.training.config import TrainConfig
 
 needs_train = pytest.mark.skipif(
     find_spec("stable_baselines3") is None or find_spec("torch") is None,
-    reason='needs the train extra: pip install "foosball_gym[train]"',
+    reason='needs the train extra: pip install -e ".[train]"',
 )
 needs_hardware = pytest.mark.skipif(
     any(find_spec(m) is None for m in ("can", "canopen", "cv2", "yaml")),
-    reason='needs python-can, canopen, OpenCV and PyYAML: pip install "foosball_gym[hardware]"',
+    reason='needs python-can, canopen, OpenCV and PyYAML: pip install -e ".[hardware]"',
 )
 
 MAIN_OPTIONS = {

@@ -17,7 +17,7 @@ from foosball_gym.registration import scripted_policy
 minari = pytest.importorskip("minari")
 needs_train = pytest.mark.skipif(
     find_spec("stable_baselines3") is None or find_spec("torch") is None,
-    reason='needs the train extra: pip install "foosball_gym[train]"',
+    reason='needs the train extra: pip install -e ".[train]"',
 )
 
 BLOCK = "Foosball-Block-v0"
@@ -240,7 +240,7 @@ def test_without_the_datasets_extra_the_command_names_it(datasets, capsys, monke
     with pytest.raises(SystemExit) as exit_info:
         record(datasets)
     assert exit_info.value.code == 2
-    assert 'pip install "foosball_gym[datasets]"' in capsys.readouterr().err
+    assert 'pip install -e ".[datasets]"' in capsys.readouterr().err
 
 
 def test_dataset_help_says_how_to_load_what_it_records(capsys):

@@ -47,7 +47,7 @@ def test_eval_names_the_options_given_on_the_command_line(tmp_path, capsys):
 
 @pytest.mark.skipif(
     find_spec("stable_baselines3") is None,
-    reason='needs the train extra: pip install "foosball_gym[train]"',
+    reason='needs the train extra: pip install -e ".[train]"',
 )
 def test_eval_of_a_model_says_which_options_are_its_training_s_and_names_it_builtin(
     tmp_path, capsys

@@ -29,7 +29,7 @@ from foosball_gym.registration import task_interface
 
 needs_hardware = pytest.mark.skipif(
     any(find_spec(m) is None for m in ("can", "canopen", "cv2", "yaml")),
-    reason='needs python-can, canopen, OpenCV and PyYAML: pip install "foosball_gym[hardware]"',
+    reason='needs python-can, canopen, OpenCV and PyYAML: pip install -e ".[hardware]"',
 )
 
 DT = 1 / 60

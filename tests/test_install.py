@@ -83,9 +83,10 @@ def test_the_pinned_torch_meets_the_train_extra(source):
     assert pin and wanted.specifier.contains(pin[1]), (wanted, pin)
 
 
-def test_the_pages_install_foosball_gym_from_its_clone():
+def test_the_pages_and_the_messages_install_foosball_gym_from_its_clone():
     # foosball_gym is not on PyPI: "pip install foosball_gym[...]" finds nothing there.
     pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    pages += [*sorted((ROOT / "foosball_gym").rglob("*.py")), *sorted((ROOT / "cli").rglob("*.py"))]
     from_index = re.compile(r"pip install [\"']?foosball_gym")
     offending = [p.relative_to(ROOT).as_posix() for p in pages if from_index.search(p.read_text())]
     assert not offending, offending

@@ -20,14 +20,14 @@ from foosball_gym.rl_zoo.__main__ import main as rl_zoo_main
 
 needs_train = pytest.mark.skipif(
     any(find_spec(m) is None for m in ("stable_baselines3", "torch", "cv2")),
-    reason='needs the train extra: pip install "foosball_gym[train]"',
+    reason='needs the train extra: pip install -e ".[train]"',
 )
 needs_zoo = pytest.mark.skipif(
-    find_spec("rl_zoo3") is None, reason='needs the zoo extra: pip install "foosball_gym[zoo]"'
+    find_spec("rl_zoo3") is None, reason='needs the zoo extra: pip install -e ".[zoo]"'
 )
 needs_rllib = pytest.mark.skipif(
     any(find_spec(m) is None for m in ("ray", "torch")),
-    reason='needs the distributed extra: pip install "foosball_gym[distributed]"',
+    reason='needs the distributed extra: pip install -e ".[distributed]"',
 )
 
 BLOCK = "Foosball-Block-v0"
@@ -181,7 +181,7 @@ def rl_zoo_train(env_id: str, logs: Path, steps: int) -> subprocess.CompletedPro
 def zoo_block_run(tmp_path_factory) -> Path:
     """RL Zoo's run of Block, 5000 steps with the shipped file: its log folder."""
     if find_spec("rl_zoo3") is None:
-        pytest.skip('needs the zoo extra: pip install "foosball_gym[zoo]"')
+        pytest.skip('needs the zoo extra: pip install -e ".[zoo]"')
     logs = tmp_path_factory.mktemp("zoo") / "logs"
     done = rl_zoo_train(BLOCK, logs, 5000)
     assert done.returncode == 0, done.stderr[-3000:]

@@ -20,7 +20,7 @@ import pytest
 # process with one that adds "TimeLimit.truncated" to the last step's info. The runs below
 # start RL Zoo in processes of their own.
 if find_spec("rl_zoo3") is None:
-    pytest.skip('needs the zoo extra: pip install "foosball_gym[zoo]"', allow_module_level=True)
+    pytest.skip('needs the zoo extra: pip install -e ".[zoo]"', allow_module_level=True)
 
 import stable_baselines3 as sb3  # noqa: E402
 import yaml  # noqa: E402

@@ -16,7 +16,7 @@ from foosball_gym.training.config_file import config_path, load_train_config, sh
 
 needs_train = pytest.mark.skipif(
     any(find_spec(m) is None for m in ("stable_baselines3", "torch", "yaml")),
-    reason='needs the train extra: pip install "foosball_gym[train]"',
+    reason='needs the train extra: pip install -e ".[train]"',
 )
 pytestmark = pytest.mark.skipif(find_spec("yaml") is None, reason="needs PyYAML (the train extra)")
 

@@ -21,7 +21,7 @@ needs_cv2 = pytest.mark.skipif(find_spec("cv2") is None, reason="writing .mp4 ne
 needs_pillow = pytest.mark.skipif(find_spec("PIL") is None, reason="writing .gif needs Pillow")
 needs_train = pytest.mark.skipif(
     any(find_spec(m) is None for m in ("stable_baselines3", "torch", "cv2")),
-    reason='needs the train extra: pip install "foosball_gym[train]"',
+    reason='needs the train extra: pip install -e ".[train]"',
 )
 
 ENV_ID = "Foosball-Block-v0"

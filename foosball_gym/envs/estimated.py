@@ -44,7 +44,7 @@ class EstimatedState:
         except ImportError as err:
             raise ImportError(
                 f"estimated_state needs filterpy ({err.name} is missing): "
-                'pip install "foosball_gym[hardware]"'
+                'pip install -e ".[hardware]"'
             ) from err
         self._estimator_class = TableStateEstimator
         self.builder = builder

@@ -1,7 +1,7 @@
 """The real table: its configuration, its CANopen drives and the safety layer in front of them.
 
 ``config`` and ``safety`` need no CAN library; :class:`TableDrives` and :class:`Cia402Drive`
-need python-can and canopen (``pip install 'foosball_gym[hardware]'``) and are imported on
+need python-can and canopen (``pip install -e '.[hardware]'``) and are imported on
 first use.
 """
 
@@ -55,7 +55,7 @@ def __getattr__(name: str) -> Any:
         import canopen  # noqa: F401
     except ImportError:
         raise ImportError(
-            f"{name} needs python-can and canopen: pip install 'foosball_gym[hardware]'"
+            f"{name} needs python-can and canopen: pip install -e '.[hardware]'"
         ) from None
     from importlib import import_module
 

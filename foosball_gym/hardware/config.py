@@ -418,7 +418,7 @@ def _yaml():
         import yaml
     except ImportError:
         raise ImportError(
-            "table configurations need PyYAML: pip install 'foosball_gym[hardware]'"
+            "table configurations need PyYAML: pip install -e '.[hardware]'"
         ) from None
     return yaml
 

@@ -8,7 +8,7 @@ try:
 except ImportError as err:
     raise ImportError(
         "foosball_gym.multiagent needs PettingZoo, which comes with the 'distributed' extra: "
-        'pip install -e ".[distributed]" in a checkout, or pip install "foosball_gym[distributed]"'
+        'pip install -e ".[distributed]" in the clone'
     ) from err
 
 from foosball_gym.multiagent.parallel import AGENTS, GAME_IDS, FoosballParallelEnv, parallel_env

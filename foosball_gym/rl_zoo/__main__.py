@@ -45,7 +45,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         import rl_zoo3  # noqa: F401
     except ImportError:
         print(
-            'error: RL Zoo is missing; install it with: pip install "foosball_gym[zoo]" '
+            'error: RL Zoo is missing; install it with: pip install -e ".[zoo]" '
             '(in a checkout: pip install -e ".[zoo]")',
             file=sys.stderr,
         )

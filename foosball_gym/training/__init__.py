@@ -9,7 +9,7 @@ The package is split by job:
 - :mod:`.sb3`: the Stable-Baselines3 backend (``train``);
 - :mod:`.rllib`: the Ray RLlib backend (``train_rllib``).
 
-Most of it needs the ``train`` extra: ``pip install "foosball_gym[train]"``. A run's
+Most of it needs the ``train`` extra: ``pip install -e ".[train]"``. A run's
 configuration and its directory's file names do not, so the CLI builds its options and reads
 a run directory on the base install; the names below import on first use, raising
 :func:`require_train_extra`'s message where the extra is missing.

@@ -231,9 +231,7 @@ def _parse(text: str, spec: str) -> Any:
     try:
         import yaml
     except ImportError:
-        raise ImportError(
-            "configuration files need PyYAML: pip install 'foosball_gym[train]'"
-        ) from None
+        raise ImportError("configuration files need PyYAML: pip install -e '.[train]'") from None
 
     class Loader(yaml.SafeLoader):
         """YAML 1.2's numbers, and no key given twice (PyYAML keeps the last, silently)."""

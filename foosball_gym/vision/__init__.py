@@ -1,6 +1,6 @@
 """Seeing the table: frame sources, calibration, ball detection, the opponent's rods.
 
-Needs OpenCV (``pip install "foosball_gym[hardware]"``); never the simulator.
+Needs OpenCV (``pip install -e ".[hardware]"``); never the simulator.
 """
 
 from foosball_gym.vision.calibration import (

@@ -155,8 +155,7 @@ def policy_from_zip(data: Mapping[str, Any], state: Mapping[str, Any]) -> Any:
         cls = getattr(importlib.import_module(module), cls_name)
     except ImportError as err:
         raise ValueError(
-            f"its {cls_name} needs {err.name}, which is not installed: "
-            'pip install "foosball_gym[train]"'
+            f'its {cls_name} needs {err.name}, which is not installed: pip install -e ".[train]"'
         ) from None
     parameters = inspect.signature(cls.__init__).parameters
     if "use_sde" in parameters and "use_sde" not in kwargs and "use_sde" in data:

@@ -17,7 +17,7 @@ def require_ray() -> None:
         raise ImportError(
             f"the rllib backend needs Ray RLlib, PettingZoo and PyTorch ({err.name} is "
             f"missing); install them with: {INSTALL} in a checkout, or "
-            'pip install "foosball_gym[distributed]"'
+            'pip install -e ".[distributed]"'
         ) from err
 
 
