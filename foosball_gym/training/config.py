@@ -70,6 +70,14 @@ class TrainConfig:
     clip_range: float = _field(0.2, "PPO's clip range")
     # SB3's own default.
     log_std_init: float = _field(0.0, "PPO's initial log standard deviation of actions")
+    adam_eps: float | None = _field(
+        None, "Adam's epsilon (None: SB3's own, 1e-5 for PPO; PyTorch's default is 1e-8)"
+    )
+    fused_adam: bool = _field(
+        False,
+        "PyTorch's fused Adam, one kernel for every parameter: faster on a CPU, its steps not "
+        "bit for bit those of the default",
+    )
     lr_schedule: str = _field("constant", "constant, or linear decay to 0 over the run")
     target_kl: float | None = _field(None, "end an update's epochs once the policy moved this far")
     pretrain_episodes: int = _field(
@@ -223,6 +231,8 @@ class TrainConfig:
             raise ValueError(
                 f"unknown lr_schedule {self.lr_schedule!r}; allowed: {', '.join(LR_SCHEDULES)}"
             )
+        if self.adam_eps is not None and not 0 < self.adam_eps < math.inf:
+            raise ValueError(f"adam_eps must be a positive number or None, got {self.adam_eps}")
         if self.target_kl is not None and not 0 < self.target_kl < math.inf:
             raise ValueError(f"target_kl must be positive, got {self.target_kl}")
         if self.target_success is not None and not 0 < self.target_success <= 1:

@@ -31,12 +31,14 @@ ALGOS = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
 
 
 def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
-    policy_kwargs: dict[str, Any] = {
-        "net_arch": list(config.net_arch),
-        # One kernel for every parameter's Adam step: on a CPU the per-tensor loop was about
-        # a third of each minibatch's update of the small networks trained here.
-        "optimizer_kwargs": {"fused": True},
-    }
+    policy_kwargs: dict[str, Any] = {"net_arch": list(config.net_arch)}
+    if config.adam_eps is not None or config.fused_adam:
+        # Left out, SB3 gives Adam its own epsilon (1e-5 for PPO); given, it takes these as
+        # they are, PyTorch's 1e-8 where no epsilon is named.
+        optimizer: dict[str, Any] = {"fused": True} if config.fused_adam else {}
+        if config.adam_eps is not None:
+            optimizer["eps"] = config.adam_eps
+        policy_kwargs["optimizer_kwargs"] = optimizer
     lr = config.learning_rate
     common: dict[str, Any] = {
         # SB3 calls a schedule with the progress remaining, from 1 down to 0.
