@@ -62,7 +62,9 @@ TASKS = {
         "Foosball-Block-v0", "builtin:block-scratch", (100_000, 200_000, 300_000, 500_000)
     ),
     "score-resting": Task(
-        "Foosball-Score-v0", "builtin:score-resting-scratch", (300_000, 1_000_000, 3_000_000)
+        "Foosball-Score-v0",
+        "builtin:score-resting-scratch",
+        (500_000, 1_000_000, 2_000_000, 4_000_000),
     ),
     "score-incoming": Task(
         "Foosball-Score-v0", "builtin:score-incoming-scratch", (300_000, 1_000_000, 3_000_000)

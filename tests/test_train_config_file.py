@@ -92,7 +92,7 @@ SHIPPED_TASKS = [
 ]
 
 
-RECIPES = ["block-scratch"]
+RECIPES = ["block-scratch", "score-resting-scratch"]
 
 
 def test_the_shipped_files_are_one_per_shipped_task_and_the_from_scratch_recipes():
