@@ -47,8 +47,11 @@ def _config(env_id: str, config_file: str | None, overrides: dict[str, Any], ste
         config = load_train_config(config_file, env_id, {})
     else:
         config = TrainConfig(env_id)
+    import yaml
+
     for key, value in overrides.items():
-        setattr(config, key, type(getattr(config, key))(value))
+        # Read as a settings file reads it: false, null, 1e-4 and [64, 64] mean what they say.
+        setattr(config, key, yaml.safe_load(value))
     config.timesteps = steps
     config.eval_freq = steps + 1
     config.eval_episodes = 1  # the one evaluation at the end, which is not timed

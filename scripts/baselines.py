@@ -23,6 +23,7 @@ import platform
 import shlex
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -157,7 +158,8 @@ def evaluate_budget(
     name: str, task: Task, seed: int, run: Path, steps: int, env: dict[str, str], episodes: int
 ) -> dict[str, object]:
     model = budget_model(run, steps)
-    with _temporary_json() as path:
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "result.json"
         command = eval_command(model, episodes)
         print("+", shlex.join(command), flush=True)
         subprocess.run(_foosball(*command[1:], "--json", str(path)), check=True, env=env,
@@ -182,19 +184,6 @@ def evaluate_budget(
     }
     print(f"  {name} seed {seed}, {steps:,} steps: {100 * row['success']:.1f} %", flush=True)
     return row
-
-
-class _temporary_json:
-    def __enter__(self) -> Path:
-        import tempfile
-
-        fd, name = tempfile.mkstemp(suffix=".json")
-        os.close(fd)
-        self.path = Path(name)
-        return self.path
-
-    def __exit__(self, *exc: object) -> None:
-        self.path.unlink(missing_ok=True)
 
 
 def _read(path: Path) -> list[dict[str, str]]:
