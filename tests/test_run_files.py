@@ -39,6 +39,8 @@ TINY = {
     "eval_freq": 10_000,
     "eval_episodes": 1,
     "checkpoint_freq": 64,
+    # The resumes below extend the run, which a decaying learning rate refuses.
+    "lr_schedule": "constant",
 }
 CHECKPOINT = "checkpoints/model_0000000128"
 
@@ -369,7 +371,7 @@ def test_a_model_zip_that_inflates_past_the_limit_is_refused_before_anything_is_
     rewrite_zip(run / "model.zip", {"policy.pth": huge})
     assert (run / "model.zip").stat().st_size < 2**20
     opened.clear()
-    with pytest.raises(ModelLoadError, match="it says it inflates to 7 MiB, past the 4 MiB"):
+    with pytest.raises(ModelLoadError, match=r"it says it inflates to \d+ MiB, past the 4 MiB"):
         load_policy(run)
     assert opened == [], "nothing was inflated"
     assert "past the 4 MiB" in refused(["eval", str(run), "--episodes", "1"], capsys)

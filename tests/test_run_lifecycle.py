@@ -37,11 +37,12 @@ from foosball_gym.training.selfplay.history import (  # noqa: E402
 from foosball_gym.training.signals import Interrupted, SignalStop  # noqa: E402
 
 SMALL = ["--n-envs", "1", "--n-steps", "64", "--batch-size", "64", "--eval-episodes", "1"]
-SMALL += ["--no-progress"]
+SMALL += ["--no-progress", "--lr-schedule", "constant"]  # a resume may extend the run
 
 
 def tiny(env_id: str = "Foosball-Block-v0", **settings) -> TrainConfig:
     base = {"n_envs": 1, "n_steps": 64, "batch_size": 64, "n_epochs": 1, "eval_episodes": 1}
+    base["lr_schedule"] = "constant"  # a resume may extend the run
     return TrainConfig(env_id, **{**base, **settings})
 
 

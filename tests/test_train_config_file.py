@@ -6,12 +6,14 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, fields
 from importlib.util import find_spec
+from pathlib import Path
 
 import pytest
 
+import foosball_gym
 from foosball_gym import ENV_IDS
 from foosball_gym.cli import build_parser, main
-from foosball_gym.training.config import TrainConfig
+from foosball_gym.training.config import LEGACY_DEFAULTS, TrainConfig
 from foosball_gym.training.config_file import config_path, load_train_config, shipped_configs
 
 needs_train = pytest.mark.skipif(
@@ -95,10 +97,33 @@ SHIPPED_TASKS = [
 RECIPES = ["block-scratch", "score-resting-scratch"]
 
 
-def test_the_shipped_files_are_one_per_shipped_task_and_the_from_scratch_recipes():
+def test_the_shipped_files_are_one_per_shipped_task_the_from_scratch_recipes_and_the_papers():
     # A new task needs no settings file (docs/add-a-task.md); one it ships names a registered id.
     assert set(SHIPPED_TASKS) <= set(ENV_IDS)
-    assert shipped_configs() == sorted(SHIPPED_TASKS + RECIPES)
+    assert shipped_configs() == sorted([*SHIPPED_TASKS, *RECIPES, "paper-ppo"])
+
+
+def test_the_defaults_are_the_block_recipe_that_learns_from_scratch():
+    recipe = load_train_config("builtin:block-scratch")
+    assert TrainConfig(env_id="Foosball-Block-v0") == recipe
+
+
+def test_paper_ppo_holds_the_defaults_the_recipe_replaced():
+    config = load_train_config("builtin:paper-ppo", env_id="Foosball-Score-v0")
+    assert config == TrainConfig(env_id="Foosball-Score-v0", **LEGACY_DEFAULTS)
+    assert config.net_arch == (256, 128, 64) and config.adam_eps is None
+
+
+def test_every_shipped_policys_training_command_names_its_settings():
+    # A command that leaves settings to the defaults would train something else once they change.
+    commands = [
+        line
+        for path in (Path(foosball_gym.__file__).parent / "builtin").glob("*/REPRODUCE.md")
+        for line in path.read_text().splitlines()
+        if line.startswith("foosball train")
+    ]
+    assert len(commands) >= 7
+    assert all("--config builtin:" in line for line in commands), commands
 
 
 @pytest.mark.parametrize("name", RECIPES)
@@ -145,7 +170,7 @@ BLOCK = "env_id: Foosball-Block-v0\n"
         (
             BLOCK + "batch_size: 5000\n",
             [],
-            "batch_size 5000 is more than a rollout holds: n_steps x n_envs = 128 x 8 = 1024",
+            "batch_size 5000 is more than a rollout holds: n_steps x n_envs = 128 x 16 = 2048",
         ),
         (BLOCK + "algo: dqn\n", [], "algo: unknown algorithm 'dqn'; allowed: ppo, sac"),
         (BLOCK + "target_success: 2.0\n", [], "target_success must lie in (0, 1]"),
@@ -230,3 +255,17 @@ def test_a_run_from_a_file_records_the_files_values_in_its_config_json(tmp_path,
     assert (config["learning_rate"], config["gamma"], config["net_arch"]) == (3e-4, 0.98, [32, 32])
     assert (config["env_id"], config["env_kwargs"]) == ("Foosball-Block-v0", {"goal_reward": 500})
     assert (run / "model.zip").exists()
+
+
+def test_a_run_from_before_a_setting_existed_keeps_the_value_it_trained_with(tmp_path):
+    # A config.json of a run from before adam_eps and fused_adam trained with SB3's Adam.
+    old = asdict(TrainConfig(env_id="Foosball-Block-v0", **LEGACY_DEFAULTS))
+    del old["adam_eps"], old["fused_adam"]
+    (tmp_path / "config.json").write_text(json.dumps(old))
+    loaded = TrainConfig.load(tmp_path / "config.json")
+    assert (loaded.adam_eps, loaded.fused_adam) == (None, False)
+    assert loaded == TrainConfig(env_id="Foosball-Block-v0", **LEGACY_DEFAULTS)
+    # One written now holds every field, the new defaults included.
+    new = TrainConfig(env_id="Foosball-Block-v0")
+    new.save(tmp_path / "config.json")
+    assert TrainConfig.load(tmp_path / "config.json") == new

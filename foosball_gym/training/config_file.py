@@ -5,8 +5,9 @@ The format is the package's own; RL Zoo's files for the same tasks are in
 
 A file maps :class:`~foosball_gym.training.config.TrainConfig` field names to values
 (``n_envs: 8``, ``net_arch: [256, 128, 64]``), ``env_kwargs`` to a mapping of environment
-options, and may name ``env_id``. ``builtin:ENV_ID`` names the file shipped for that
-environment (``foosball_gym/configs/ENV_ID.yaml``). Values given on the command line override
+options, and may name ``env_id``. ``builtin:NAME`` names a file shipped in
+``foosball_gym/configs/NAME.yaml``: one per environment id, the from-scratch recipes, and
+``paper-ppo``. Values given on the command line override
 the file's; ``env_kwargs`` merge key by key.
 
 Needs PyYAML (the ``train`` extra), imported only when a file is read.
@@ -63,7 +64,8 @@ class ConfigFileError(ValueError):
 
 
 def shipped_configs() -> list[str]:
-    """The names of the shipped files, each an environment id: ``builtin:NAME`` reads one."""
+    """The names of the shipped files (an environment id's settings, a recipe, or
+    ``paper-ppo``, the paper's PPO settings): ``builtin:NAME`` reads one."""
     return sorted(p.stem for p in _shipped_folder().glob("*.yaml"))
 
 

@@ -78,7 +78,8 @@ def _extended(config: TrainConfig, timesteps: int, out: Path) -> TrainConfig:
         raise ValueError(
             f"the run in {out} decays its learning rate to 0 over {config.timesteps} steps "
             f"(lr_schedule {config.lr_schedule}); a longer run would start the decay over: "
-            "resume it as it is, or train a new run"
+            "resume it as it is, or train a new run (with --lr-schedule constant, a run can be "
+            "extended)"
         )
     config.timesteps = timesteps
     return config
