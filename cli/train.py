@@ -80,6 +80,8 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "selfplay_scripted_share": {"type": float},
     "selfplay_scripted_levels": {"type": _levels, "metavar": "N,N,..."},
     "selfplay_gate": {"type": whole_number, "metavar": "GAMES"},
+    "selfplay_stall_games": {"type": whole_number, "metavar": "GAMES"},
+    "selfplay_stall_fallback": {"choices": ("none", *SELFPLAY_RULES)},
     "target_success": {"type": float},
     "video_every": {"type": positive_int, "metavar": "N"},
 }

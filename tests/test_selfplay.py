@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -257,3 +259,24 @@ def test_opponents_act_on_their_mean_by_default():
     assert snap.deterministic
     actions = snap(np.zeros((8, model.observation_space.shape[0])))
     assert np.ptp(actions, axis=0).max() == 0.0
+
+
+def test_a_stalled_run_says_so_once_and_falls_back_to_a_rule_that_can_fire(tmp_path, capsys):
+    # A win rate of 99 % is never reached: the run stalls after 6 games and says so.
+    model = selfplay_model(DummyVecEnv)
+    callback = SelfPlayCallback(
+        window=3, threshold=0.99, save_dir=tmp_path, stall_games=6, fallback="net_score"
+    )
+    model.learn(3000, callback=callback)
+    out = capsys.readouterr().out
+    assert callback.judge.games >= 6, "the run played too few games to judge"
+    assert out.count("self-play stalled at") == 1, out
+    assert "no new opponent in 6 games against generation 0" in out
+    assert "judging by the net_score rule (0.2) from now on" in out
+    assert callback.stalls == 1
+    lines = (tmp_path / "stalls.jsonl").read_text().splitlines()
+    assert len(lines) == 1
+    record = json.loads(lines[0])
+    assert (record["generation"], record["since"], record["rule"]) == (0, 6, "win_rate")
+    assert record["fallback"] == "net_score" and record["timesteps"] > 0
+    assert callback.judge.rule == "net_score"

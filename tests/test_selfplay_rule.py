@@ -4,6 +4,7 @@ rating, without a learner."""
 from __future__ import annotations
 
 import math
+import re
 
 import gymnasium as gym
 import numpy as np
@@ -192,3 +193,69 @@ def test_a_run_from_before_the_rule_was_an_option_keeps_the_net_score(tmp_path):
     new.check()
     new.save(path)
     assert TrainConfig.load(path).selfplay_rule == "win_rate"
+
+
+def test_a_rule_that_cannot_fire_against_a_drawing_opponent_stalls_and_falls_back():
+    from foosball_gym.training.selfplay.rule import ReplacementRule
+
+    # The learner against its first copy: 6 wins, 85 draws, 9 losses in every 100 games.
+    games = [1] * 6 + [0] * 85 + [-1] * 9
+    rule = ReplacementRule("win_rate", 0.2, 100, stall_games=300, fallback="significant")
+    for result in games * 3:
+        assert rule.record(result) is None
+        stall = rule.take_stall()
+        if stall:
+            found = stall
+    assert found.games == found.since == 300 and found.rule == "win_rate"
+    assert (found.win_rate, found.draw_rate, found.loss_rate) == (0.06, 0.85, 0.09)
+    assert found.fallback == "significant" and found.fallback_threshold == 0.05
+    assert rule.rule == "significant" and rule.take_stall() is None
+    # Once the learner wins clearly more of the decisive games, an opponent is earned ...
+    replaced = [rule.record(r) for r in [1] * 12 + [0] * 86 + [-1] * 2]
+    assert replaced[-1] is not None and rule.replaced_at == 400
+    # ... and a stall against the new opponent is told again, the rule staying.
+    for result in games * 3:
+        rule.record(result)
+    again = rule.take_stall()
+    assert again is not None and again.fallback is None and rule.rule == "significant"
+
+
+def test_without_a_stall_limit_a_rule_never_stalls():
+    from foosball_gym.training.selfplay.rule import ReplacementRule
+
+    rule = ReplacementRule("win_rate", 0.2, 10)
+    for _ in range(10_000):
+        rule.record(0)
+        assert rule.take_stall() is None
+    assert rule.rule == "win_rate"
+
+
+def test_a_resumed_run_judges_by_the_rule_its_stall_switched_to(tmp_path):
+    from foosball_gym.training.selfplay.history import SnapshotHistory
+    from foosball_gym.training.selfplay.rule import ReplacementRule
+
+    first = ReplacementRule("win_rate", 0.2, 10, stall_games=20, fallback="significant")
+    history = SnapshotHistory(tmp_path, first, 1)
+    history.add(0, 0, None, 0.0, [0])
+    for _ in range(20):
+        first.record(0)
+    assert first.take_stall() is not None and first.rule == "significant"
+    history.add(1, 5000, 0.01, 50.0, [1])  # a replacement under the fallback rule
+    resumed = ReplacementRule("win_rate", 0.2, 10, stall_games=20, fallback="significant")
+    SnapshotHistory(tmp_path, resumed, 1).restore()
+    assert (resumed.rule, resumed.threshold) == ("significant", 0.05)
+    assert resumed.games == resumed.replaced_at == 20
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        ({"selfplay_stall_fallback": "ladder"}, "unknown selfplay_stall_fallback 'ladder'"),
+        ({"selfplay_stall_games": 50}, "at least a window of games (100), got 50"),
+    ],
+)
+def test_bad_stall_settings_are_refused(settings, message):
+    from foosball_gym.training.config import TrainConfig
+
+    with pytest.raises(ValueError, match=re.escape(message)):
+        TrainConfig("Foosball-KeeperVsKeeper-v0", **settings).check()

@@ -18,7 +18,7 @@ import gymnasium as gym
 from foosball_gym.registration import ENV_IDS, check_env_id, env_class
 from foosball_gym.training.run_dir.files import atomic_write_text, read_json
 from foosball_gym.training.run_dir.physics import physics_record
-from foosball_gym.training.selfplay.rule import check_rule, default_threshold
+from foosball_gym.training.selfplay.rule import SELFPLAY_RULES, check_rule, default_threshold
 
 if TYPE_CHECKING:
     from foosball_gym.envs.base import FoosballEnv
@@ -39,6 +39,7 @@ LEGACY_DEFAULTS: dict[str, Any] = {
     "fused_adam": False,
     "lr_schedule": "constant",
     "eval_freq": 10_000,
+    "selfplay_stall_games": 0,
 }
 
 
@@ -147,6 +148,16 @@ class TrainConfig:
         "it stands only with no more losses than wins, and a better goal difference than the "
         "opponent's against the scripted side (0: off)",
     )
+    selfplay_stall_games: int = _field(
+        2000,
+        "after this many games without a new opponent, self-play has stalled: the run says so "
+        "and judges by selfplay_stall_fallback from then on (0: never)",
+    )
+    selfplay_stall_fallback: str = _field(
+        "significant",
+        "the replacement rule a stall switches to (none: keep the rule); significant needs "
+        "no win rate, only more wins than losses among decisive games, beyond chance",
+    )
     eval_freq: int = _field(25_000, "evaluate every this many steps")
     eval_episodes: int = _field(50, "seeded episodes per evaluation")
     checkpoint_freq: int = _field(50_000, "write a checkpoint every this many steps")
@@ -243,6 +254,16 @@ class TrainConfig:
         if self.selfplay_threshold is None:
             self.selfplay_threshold = default_threshold(self.selfplay_rule)
         check_rule(self.selfplay_rule, self.selfplay_threshold)
+        if self.selfplay_stall_fallback not in ("none", *SELFPLAY_RULES):
+            raise ValueError(
+                f"unknown selfplay_stall_fallback {self.selfplay_stall_fallback!r}; allowed: "
+                f"none, {', '.join(SELFPLAY_RULES)}"
+            )
+        if self.selfplay_stall_games and self.selfplay_stall_games < self.selfplay_window:
+            raise ValueError(
+                f"selfplay_stall_games must be 0 (never) or at least a window of games "
+                f"({self.selfplay_window}), got {self.selfplay_stall_games}"
+            )
         if self.lr_schedule not in LR_SCHEDULES:
             raise ValueError(
                 f"unknown lr_schedule {self.lr_schedule!r}; allowed: {', '.join(LR_SCHEDULES)}"
@@ -382,3 +403,8 @@ def _of_kind(value: Any, kind: str) -> bool:
     if kind == "tuple[int, ...]":
         return isinstance(value, list) and all(whole(v) for v in value)
     return isinstance(value, dict)
+
+
+def stall_fallback(config: TrainConfig) -> str | None:
+    """The rule a stall of ``config``'s self-play switches to; None keeps the rule."""
+    return None if config.selfplay_stall_fallback == "none" else config.selfplay_stall_fallback

@@ -6,15 +6,17 @@ and played by the modules ``opponent_<generation>``.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.training.config import TrainConfig
+from foosball_gym.training.config import TrainConfig, stall_fallback
 from foosball_gym.training.rllib.env_runner import opponent_id
+from foosball_gym.training.run_dir.files import append_text
 from foosball_gym.training.run_dir.tensors import load_tensors, save_tensors
-from foosball_gym.training.selfplay.history import SnapshotHistory, snapshot_file
-from foosball_gym.training.selfplay.rule import ReplacementRule
+from foosball_gym.training.selfplay.history import STALL_LOG, SnapshotHistory, snapshot_file
+from foosball_gym.training.selfplay.rule import ReplacementRule, Stall
 
 
 class OpponentPool:
@@ -24,12 +26,17 @@ class OpponentPool:
     def __init__(self, config: TrainConfig, save_dir: Path) -> None:
         assert config.selfplay_threshold is not None  # config.check() sets the rule's default
         self.rule = ReplacementRule(
-            config.selfplay_rule, config.selfplay_threshold, config.selfplay_window
+            config.selfplay_rule,
+            config.selfplay_threshold,
+            config.selfplay_window,
+            config.selfplay_stall_games,
+            stall_fallback(config),
         )
         self.pool_size = config.selfplay_pool
         self.save_dir = save_dir
         self.history = SnapshotHistory(save_dir, self.rule, self.pool_size)
         self.pool: list[int] = []  # generations
+        self._stalls: list[Stall] = []
 
     @property
     def generation(self) -> int:
@@ -66,9 +73,24 @@ class OpponentPool:
         """
         for result in games:
             replaced = self.rule.record(int(result))
+            stall = self.rule.take_stall()
+            if stall is not None:
+                self._stalls.append(stall)
             if replaced is not None:
                 return replaced
         return None
+
+    def take_stalls(self, timesteps: int) -> list[str]:
+        """The stalls the games judged since the last call found, each written to
+        ``stalls.jsonl``: a line for the run's log each."""
+        lines = []
+        for stall in self._stalls:
+            self.save_dir.mkdir(parents=True, exist_ok=True)
+            record = stall.record(self.generation, timesteps)
+            append_text(self.save_dir / STALL_LOG, json.dumps(record) + "\n")
+            lines.append(stall.message(self.generation, timesteps))
+        self._stalls.clear()
+        return lines
 
     def rates(self) -> dict[str, float | None]:
         rates = self.rule.rates()

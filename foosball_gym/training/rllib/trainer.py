@@ -281,6 +281,8 @@ def _train(
                 games = runners.get("selfplay_games")
                 games = [] if games is None or np.isscalar(games) else list(games)
                 replaced = selfplay.judge(games)
+                for line in selfplay.take_stalls(steps):
+                    print(line, flush=True)  # whatever the verbosity: see SelfPlayCallback
                 if replaced is not None:
                     score, elo = replaced
                     state = _learner_state(algo)

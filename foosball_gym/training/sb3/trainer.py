@@ -20,7 +20,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import VecNormalize
 
 from foosball_gym.table import PHYSICS_REVISION
-from foosball_gym.training.config import TrainConfig
+from foosball_gym.training.config import TrainConfig, stall_fallback
 from foosball_gym.training.resume import set_aside_after
 from foosball_gym.training.run_dir.curve import EvalCurve
 from foosball_gym.training.run_dir.files import (
@@ -253,6 +253,8 @@ def _train(
                     else None
                 ),
                 stop=stop,
+                stall_games=config.selfplay_stall_games,
+                fallback=stall_fallback(config),
             )
         )
     if config.teacher_steps:

@@ -19,7 +19,12 @@ from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
 from foosball_gym.training.run_dir.files import append_text
 from foosball_gym.training.run_dir.storage import save_model
 from foosball_gym.training.selfplay.gate import ReplacementGate
-from foosball_gym.training.selfplay.history import GATE_LOG, SnapshotHistory, snapshot_file
+from foosball_gym.training.selfplay.history import (
+    GATE_LOG,
+    STALL_LOG,
+    SnapshotHistory,
+    snapshot_file,
+)
 from foosball_gym.training.selfplay.opponents import (
     AGAINST_ANCHOR,
     SelfPlayVecEnv,
@@ -57,6 +62,10 @@ class SelfPlayCallback(BaseCallback):
             ``foosball eval`` and ``load_policy`` read like any model.
         stop: the run's signal stop: a signal during the gate's games ends them (and the
             run) where it lands, the replacement not judged.
+        stall_games, fallback: after this many games without a new opponent the run has
+            stalled; it says so (printed, ``selfplay/stalls`` in TensorBoard, a line in
+            ``stalls.jsonl``) and judges by the ``fallback`` rule from then on (see
+            :class:`~foosball_gym.training.selfplay.rule.ReplacementRule`; 0: never).
 
     TensorBoard gets the window's rates and ``selfplay/elo``, the learner's rating against its
     opponents (see :class:`~foosball_gym.training.selfplay.rule.ReplacementRule`). Games
@@ -76,12 +85,15 @@ class SelfPlayCallback(BaseCallback):
         sampled: bool = False,
         gate: ReplacementGate | None = None,
         stop: SignalStop | None = None,
+        stall_games: int = 0,
+        fallback: str | None = None,
     ) -> None:
         super().__init__(verbose)
         self.stop = stop
         if pool_size < 1:
             raise ValueError(f"pool_size must be at least 1, got {pool_size}")
-        self.judge = ReplacementRule(rule, threshold, window)
+        self.judge = ReplacementRule(rule, threshold, window, stall_games, fallback)
+        self.stalls = 0
         self.pool_size = pool_size
         self.sampled = sampled
         self.gate = gate
@@ -113,6 +125,7 @@ class SelfPlayCallback(BaseCallback):
                 self._anchor_goals.append((info.get("goals_for", 0), info.get("goals_against", 0)))
             elif done:
                 replaced = self.judge.record(game_result(info))
+                self._report_stall()
                 try:
                     passed = replaced is not None and self._gate_passes()
                 except Interrupted:
@@ -135,6 +148,19 @@ class SelfPlayCallback(BaseCallback):
                 "selfplay/anchor_goals_against", sum(g[1] for g in self._anchor_goals) / games
             )
         return True
+
+    def _report_stall(self) -> None:
+        stall = self.judge.take_stall()
+        if stall is None:
+            return
+        self.stalls += 1
+        self.logger.record("selfplay/stalls", self.stalls)
+        # Printed whatever the verbosity: a run that stopped climbing must not look busy.
+        print(stall.message(self.generation, self.num_timesteps), flush=True)
+        if self.save_dir is not None:
+            self.save_dir.mkdir(parents=True, exist_ok=True)
+            line = json.dumps(stall.record(self.generation, self.num_timesteps)) + "\n"
+            append_text(self.save_dir / STALL_LOG, line)
 
     def _gate_passes(self) -> bool:
         if self.gate is None:

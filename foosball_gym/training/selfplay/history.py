@@ -21,6 +21,8 @@ from foosball_gym.training.selfplay.rule import ReplacementRule
 
 # What self-play's gate writes: its verdicts, and the generations that passed as models.
 GATE_LOG = "gate.jsonl"
+# The stalls a run found: one line each, when and against which generation.
+STALL_LOG = "stalls.jsonl"
 
 
 def snapshot_file(save_dir: Path, generation: int) -> Path:
@@ -58,9 +60,17 @@ def read_history(path: Path) -> list[dict[str, Any]]:
 
 
 def set_aside_generations(save_dir: Path, timesteps: int, lost: Path) -> int:
-    """Move the records, snapshots and gate verdicts of the generations made after
-    ``timesteps`` (on a branch of the run that was lost) from ``save_dir`` into ``lost``;
-    how many generations that was."""
+    """Move the records, snapshots, gate verdicts and stalls made after ``timesteps`` (on a
+    branch of the run that was lost) from ``save_dir`` into ``lost``; how many generations
+    that was."""
+    for log in (GATE_LOG, STALL_LOG):
+        path = save_dir / log
+        lines = path.read_text().splitlines(keepends=True) if path.exists() else []
+        late = [line for line in lines if _verdict_steps(line, path) > timesteps]
+        if late:
+            lost.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(lost / log, "".join(late))
+            atomic_write_text(path, "".join(line for line in lines if line not in late))
     path = save_dir / HISTORY_FILE
     if not path.exists():
         return 0
@@ -74,13 +84,6 @@ def set_aside_generations(save_dir: Path, timesteps: int, lost: Path) -> int:
         for file in generation_files(save_dir, record["generation"]):
             shutil.move(file, lost / file.name)
     atomic_write_text(lost / HISTORY_FILE, json.dumps(gone, indent=1))
-    gate = save_dir / GATE_LOG
-    if gate.exists():
-        lines = gate.read_text().splitlines(keepends=True)
-        late = [line for line in lines if _verdict_steps(line, gate) > timesteps]
-        if late:
-            atomic_write_text(lost / GATE_LOG, "".join(late))
-            atomic_write_text(gate, "".join(line for line in lines if line not in late))
     atomic_write_text(path, json.dumps(kept, indent=1))
     return len(gone)
 
@@ -111,13 +114,13 @@ def restored_elo(history: list[dict[str, Any]], generations: list[int]) -> float
     return float(np.mean([by_generation.get(g, 0.0) for g in generations]))
 
 
-def _verdict_steps(line: str, gate: Path) -> int:
+def _verdict_steps(line: str, log: Path) -> int:
     try:
         steps = json.loads(line)["timesteps"]
     except (json.JSONDecodeError, KeyError, TypeError):
         steps = None
     if not isinstance(steps, int):
-        raise ValueError(f"{gate} is damaged: a line is not a verdict with its timesteps")
+        raise ValueError(f"{log} is damaged: a line is not a record with its timesteps")
     return steps
 
 
@@ -149,7 +152,11 @@ class SnapshotHistory:
         if not self.records:
             raise ValueError(f"{self.save_dir / HISTORY_FILE} holds no generation")
         pool = [h["generation"] for h in self.records][-self.pool_size :]
-        self.rule.games = self.records[-1]["games"]
+        self.rule.games = self.rule.replaced_at = self.records[-1]["games"]
+        if self.records[-1].get("rule") not in (None, self.rule.rule):
+            # A stall switched the rule before the last replacement; a stall since then the
+            # resumed run finds again after as many games.
+            self.rule.fall_back()
         self.rule.opponent_elo = restored_elo(self.records, pool)
         return pool
 

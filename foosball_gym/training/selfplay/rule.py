@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Mapping
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -78,6 +79,50 @@ def performance_elo(results: np.ndarray, opponent_elo: float) -> float:
     return opponent_elo + 400.0 * math.log10(score / (1.0 - score))
 
 
+@dataclass(frozen=True)
+class Stall:
+    """Self-play that went ``since`` games without replacing its opponent: what the last
+    window of games was, and the rule that judges from now on."""
+
+    games: int
+    since: int
+    win_rate: float
+    draw_rate: float
+    loss_rate: float
+    rule: str
+    threshold: float
+    fallback: str | None
+    fallback_threshold: float | None
+
+    def message(self, generation: int, timesteps: int) -> str:
+        """One line for the run's log."""
+        then = (
+            f"judging by the {self.fallback} rule ({self.fallback_threshold:g}) from now on"
+            if self.fallback
+            else "the rule stays"
+        )
+        return (
+            f"self-play stalled at {timesteps:,} steps: no new opponent in {self.since:,} games "
+            f"against generation {generation} (the last window won {self.win_rate:.0%}, drawn "
+            f"{self.draw_rate:.0%}, lost {self.loss_rate:.0%}; the {self.rule} rule asks "
+            f"{_asks(self.rule, self.threshold)}); {then}"
+        )
+
+    def record(self, generation: int, timesteps: int) -> dict[str, Any]:
+        """A line of the run's ``selfplay/stalls.jsonl``."""
+        return {"generation": generation, "timesteps": int(timesteps), **asdict(self)}
+
+
+def _asks(rule: str, threshold: float) -> str:
+    if rule == "win_rate":
+        return f"a win rate of {threshold:.0%}"
+    if rule == "winning":
+        return f"a win rate of {threshold:.0%} and more wins than losses"
+    if rule == "significant":
+        return f"more wins than losses among decisive games, at the {threshold:g} level"
+    return f"a net score above {threshold:+.2f}"
+
+
 class ReplacementRule:
     """Counts finished games (+1 won, 0 drawn, -1 lost) and says when the opponent is beaten.
 
@@ -88,6 +133,12 @@ class ReplacementRule:
             among decisive games pass a one-sided sign test at level ``threshold``).
         threshold: see ``rule``.
         window: the last this many games are judged; none is judged before the window is full.
+        stall_games: after this many games without a replacement self-play has stalled:
+            :meth:`take_stall` says so once, and the ``fallback`` rule, with its default
+            threshold, judges from then on (0: never). The paper's rule cannot fire against an
+            opponent that draws nearly every game, and would leave the learner against its
+            first copy for good.
+        fallback: the rule a stall switches to; None keeps the rule.
 
     The learner's Elo rating is its performance over the window against its opponents, whose
     ratings are the learner's at the moment each was frozen (generation 0 rates 0); set
@@ -95,16 +146,33 @@ class ReplacementRule:
     their mean rating.
     """
 
-    def __init__(self, rule: str = "win_rate", threshold: float = 0.2, window: int = 100) -> None:
+    def __init__(
+        self,
+        rule: str = "win_rate",
+        threshold: float = 0.2,
+        window: int = 100,
+        stall_games: int = 0,
+        fallback: str | None = None,
+    ) -> None:
         check_rule(rule, threshold)
         if window < 1:
             raise ValueError(f"window must be at least 1 game, got {window}")
+        if stall_games < 0:
+            raise ValueError(f"stall_games must be 0 (never) or more, got {stall_games}")
+        if fallback is not None:
+            default_threshold(fallback)  # raises for an unknown rule
         self.rule = rule
         self.threshold = float(threshold)
         self.window = int(window)
+        self.stall_games = int(stall_games)
+        self.fallback = fallback
         self.results: deque[int] = deque(maxlen=self.window)
         self.games = 0
         self.opponent_elo = 0.0
+        # The count of games when the opponent last changed (or judging began).
+        self.replaced_at = 0
+        self._stall: Stall | None = None
+        self._stall_reported = False
 
     def score(self) -> float:
         """The rule's measure over the games in the window."""
@@ -131,6 +199,12 @@ class ReplacementRule:
         """
         self.results.append(int(result))
         self.games += 1
+        if (
+            self.stall_games
+            and not self._stall_reported
+            and self.games - self.replaced_at >= self.stall_games
+        ):
+            self._stalled()
         if len(self.results) < self.window:
             return None
         score = self.score()
@@ -149,7 +223,41 @@ class ReplacementRule:
         elo = self.elo()
         assert elo is not None  # the window is full
         self.results.clear()
+        self.replaced_at = self.games
+        self._stall_reported = False
         return score, elo
+
+    def take_stall(self) -> Stall | None:
+        """The stall the last game found, once; None where it found none."""
+        stall, self._stall = self._stall, None
+        return stall
+
+    def fall_back(self) -> bool:
+        """Judge by the fallback rule from now on; whether the rule changed."""
+        if self.fallback is None or self.fallback == self.rule:
+            return False
+        self.rule, self.threshold = self.fallback, default_threshold(self.fallback)
+        return True
+
+    def _stalled(self) -> None:
+        res = np.array(self.results)
+        rule, threshold = self.rule, self.threshold
+        changed = self.fall_back()
+        self._stall = Stall(
+            games=self.games,
+            since=self.games - self.replaced_at,
+            win_rate=float((res > 0).mean()),
+            draw_rate=float((res == 0).mean()),
+            loss_rate=float((res < 0).mean()),
+            rule=rule,
+            threshold=threshold,
+            fallback=self.rule if changed else None,
+            fallback_threshold=self.threshold if changed else None,
+        )
+        self._stall_reported = True
+        if changed and self.rule == "significant":
+            # Its verdicts are on whole windows of games judged afresh.
+            self.results.clear()
 
     def rates(self) -> dict[str, float]:
         """What TensorBoard shows: the window's rates and the learner's rating."""
