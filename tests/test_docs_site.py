@@ -12,8 +12,10 @@ Needs the docs extra (``pip install -e ".[docs]"``) and Chromium (tests/conftest
 
 from __future__ import annotations
 
+import html
 import io
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -179,3 +181,34 @@ def test_the_checks_find_a_command_cut_off_and_a_picture_too_wide_for_a_phone(si
     phone = {found["what"] for found in cut_off(windows["phone"], site, page)}
     assert laptop == {"scrolls"}, laptop
     assert {"scrolls", "sticks out"} <= phone, phone
+
+
+BUILTIN = ROOT / "foosball_gym" / "builtin"
+SHELL_BLOCK = re.compile(r"^```bash\n(.*?)^```", re.S | re.M)
+CODE = re.compile(
+    r'<div class="language-bash highlight"><pre><span></span><code>(.*?)</code>', re.S
+)
+
+
+def test_every_shipped_policy_has_a_page_of_the_site():
+    shipped = {path.parent.name for path in BUILTIN.glob("*/REPRODUCE.md")}
+    pages = {path.stem for path in (DOCS / "results" / "shipped").glob("*.md")}
+    assert shipped == pages
+
+
+@pytest.mark.parametrize("name", sorted(p.parent.name for p in BUILTIN.glob("*/REPRODUCE.md")))
+def test_a_shipped_policys_page_gives_the_commands_of_its_reproduce_file(site, name):
+    # The page is the file that ships with the policy; a command longer than the page is
+    # continued over lines, which the shell joins back into the command as written.
+    written = [
+        line
+        for block in SHELL_BLOCK.findall((BUILTIN / name / "REPRODUCE.md").read_text())
+        for line in block.splitlines()
+        if line.strip()
+    ]
+    assert any(line.startswith("foosball ") for line in written), name
+    page = (site / "results" / "shipped" / name / "index.html").read_text()
+    shown = [html.unescape(re.sub(r"<[^>]+>", "", code)) for code in CODE.findall(page)]
+    joined = "\n".join(code.replace(" \\\n  ", " ") for code in shown)
+    assert all(line in joined.splitlines() for line in written), (written, shown)
+    assert max(len(line) for code in shown for line in code.splitlines()) <= 100
