@@ -167,15 +167,15 @@ def test_the_whole_page_screenshot_is_the_windows_width(site, windows, label, pa
 
 def test_the_checks_find_a_command_cut_off_and_a_picture_too_wide_for_a_phone(site, windows):
     # A page of the site given a line longer than any code block and a picture 600 px wide.
-    html = (site / "getting-started" / "index.html").read_text()
+    text = (site / "getting-started" / "index.html").read_text()
     long_line = "foosball train Foosball-Block-v0" + " --option value" * 30
-    html = html.replace(
+    text = text.replace(
         "<h1",
         f'<pre><code>{long_line}</code></pre><p><img src="x.png" '
         'style="width: 600px; height: 10px; max-width: none"></p><h1',
         1,
     )
-    (site / "getting-started" / "cut-off.html").write_text(html)
+    (site / "getting-started" / "cut-off.html").write_text(text)
     page = "getting-started/cut-off.html"
     laptop = {found["what"] for found in cut_off(windows["laptop"], site, page)}
     phone = {found["what"] for found in cut_off(windows["phone"], site, page)}
