@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     from foosball_gym.sysid.fit import fit
 
     try:
-        result = fit(logs)
+        result = fit(logs, progress=True)
     except LogError as err:
         raise CliError(str(err)) from None
     print(result.summary())

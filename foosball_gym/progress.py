@@ -94,6 +94,13 @@ class Progress:
         if self._bar is not None:
             self._bar.set_postfix_str(note, refresh=False)
 
+    def set_total(self, total: int) -> None:
+        """The work takes ``total`` units after all (a fit that finds more to do)."""
+        self.total = total
+        if self._bar is not None:
+            self._bar.total = total
+            self._bar.refresh()
+
     def update(self, n: int = 1) -> None:
         """``n`` more units done."""
         self.done += n

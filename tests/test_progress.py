@@ -126,3 +126,16 @@ def test_a_count_that_ends_short_says_where_it_ended_with_no_time_left_to_guess(
     line = stream.getvalue().strip()
     assert line.startswith("train: ended at 10,000/500,736 steps (2 %)"), line
     assert "left" not in line
+
+
+def test_a_count_whose_work_grows_counts_to_its_new_total():
+    # A fit that leaves out a stretch it cannot reproduce fits the rest again.
+    stream = io.StringIO()
+    count = Progress(4, "sysid", "stretch fits", stream=stream, every_s=0)
+    count.update(4)
+    count.set_total(7)
+    count.update()
+    count.close()
+    lines = stream.getvalue().splitlines()
+    assert lines[-2].startswith("sysid: 5/7 stretch fits (71 %), 0:00:00 elapsed, about "), lines
+    assert lines[-1].startswith("sysid: ended at 5/7 stretch fits (71 %)"), lines

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -204,6 +205,19 @@ def test_the_outputs_are_checked_before_the_fit(good_log, capsys):
     assert "--plot fit.txt: the picture's suffix must be one of" in sysid_error(
         [str(good_log), "--plot", "fit.txt"], capsys
     )
+
+
+def test_sysid_shows_the_fit_going_on_stderr_and_keeps_its_report_on_stdout(good_log, capsys):
+    # Off a terminal a plain line now and then, and one at the end: the stretches' starts
+    # fitted, out of the most the fit may take, and whether the ball's physics settled early.
+    assert main(["sysid", str(good_log)]) == 0
+    captured = capsys.readouterr()
+    assert re.search(
+        r"^sysid: (ended at )?\d+/\d+ stretch fits \(\d+ %\), settled in \d of at most \d steps, ",
+        captured.err,
+        re.M,
+    ), captured.err
+    assert captured.out.startswith("1 log(s), 60 loops") and "sysid:" not in captured.out
 
 
 # ---------------------------------------------------------------- without the simulator

@@ -30,6 +30,7 @@ import numpy as np
 from scipy.optimize import OptimizeResult, brentq, least_squares
 
 from foosball_gym import table
+from foosball_gym.progress import Progress
 from foosball_gym.sim.replay import BallReplay
 from foosball_gym.sysid.segments import BallSegment
 
@@ -186,8 +187,16 @@ class BallProblem:
         return np.array(out)
 
 
-def fit_ball(segments: list[BallSegment], replay: BallReplay) -> BallFit:
+def fit_ball(
+    segments: list[BallSegment], replay: BallReplay, count: Progress | None = None
+) -> BallFit:
     """Fit the ball's parameters to the stretches (see the module's docstring).
+
+    Args:
+        segments: the stretches of the ball's track.
+        replay: the simulator that replays them.
+        count: counts each stretch's start fitted, out of the most the fit may take (it
+            ends short where the physics settles early).
 
     Raises:
         ValueError: no stretch to fit.
@@ -201,16 +210,22 @@ def fit_ball(segments: list[BallSegment], replay: BallReplay) -> BallFit:
     kept = [i for i, s in enumerate(segments) if s.wall is None]
     if not kept:
         raise ValueError("no stretch of the ball's track to fit")
+    if count is not None:
+        count.set_total(count.done + (_OUTER_ITERATIONS + 2) * len(kept))
     guess = np.zeros((len(segments), _STATE))
     guess[kept] = [first_guess(problem, defaults, i) for i in kept]
-    starts_before = fit_starts(problem, defaults, guess, kept)
+    starts_before = fit_starts(problem, defaults, guess, kept, count)
     # 1. Rolling resistance and friction, every start with them.
-    physics, starts, rolling_std = _fit_rolling(problem, defaults, starts_before.copy(), kept)
+    physics, starts, rolling_std = _fit_rolling(
+        problem, defaults, starts_before.copy(), kept, count
+    )
     rms = problem.rms(problem.residuals(physics, starts[kept], kept), kept)
     bad = (rms > _OUTLIER_FACTOR * np.median(rms)) & (rms > _OUTLIER_M)
     if bad.any() and (~bad).sum() >= 2:
         kept = [i for i, out in zip(kept, bad) if not out]
-        physics, starts, rolling_std = _fit_rolling(problem, physics, starts, kept)
+        if count is not None:
+            count.set_total(count.done + (_OUTER_ITERATIONS + 1) * len(kept))
+        physics, starts, rolling_std = _fit_rolling(problem, physics, starts, kept, count)
     # 2. Restitution, from the bounces out of the stretches kept.
     found = [b for b in _bounces(problem, physics, starts, kept) if b.restitution is not None]
     physics[1], restitution_std, bounces = _combine(found)
@@ -308,18 +323,28 @@ def fit_start(
 
 
 def fit_starts(
-    problem: BallProblem, physics: np.ndarray, starts: np.ndarray, which: list[int]
+    problem: BallProblem,
+    physics: np.ndarray,
+    starts: np.ndarray,
+    which: list[int],
+    count: Progress | None = None,
 ) -> np.ndarray:
     """The starts of the stretches ``which`` under fixed physics (``starts`` indexed by
-    stretch; those not in ``which`` are kept)."""
+    stretch; those not in ``which`` are kept), each counted into ``count``."""
     out = np.array(starts, dtype=float)
     for i in which:
         out[i] = fit_start(problem, physics, i, out[i]).x
+        if count is not None:
+            count.update()
     return out
 
 
 def _fit_rolling(
-    problem: BallProblem, physics: np.ndarray, starts: np.ndarray, which: list[int]
+    problem: BallProblem,
+    physics: np.ndarray,
+    starts: np.ndarray,
+    which: list[int],
+    count: Progress | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rolling resistance and friction, the starts of the stretches ``which`` fitted with them:
     (physics, starts, the two parameters' uncertainties: the data's, and the last step's).
@@ -336,7 +361,9 @@ def _fit_rolling(
     high = np.array([BALL_BOUNDS["rolling_resistance"][1], BALL_BOUNDS["ball_friction"][1]])
     covariance = np.full((2, 2), np.inf)
     last = np.zeros(2)
-    for _ in range(_OUTER_ITERATIONS):
+    for step_number in range(1, _OUTER_ITERATIONS + 1):
+        if count is not None:
+            count.set_note(f"step {step_number} of at most {_OUTER_ITERATIONS}")
         bread, scores = np.zeros((2, 2)), []
         for i in which:
             start = _better(problem, physics, i, starts[i])
@@ -345,6 +372,8 @@ def _fit_rolling(
             reduced = _reduced_jacobian(problem, physics, i, result)
             scores.append(reduced.T @ result.fun)
             bread += reduced.T @ reduced
+            if count is not None:
+                count.update()
         step = -np.linalg.lstsq(bread, np.sum(scores, axis=0), rcond=1e-12)[0]
         covariance = _sandwich(bread, np.array(scores))
         # A step back over the last one overshot: half as far. Never further than the
@@ -357,9 +386,13 @@ def _fit_rolling(
         # Settled: the step is within the uncertainty, or a small share of the value.
         settled = np.maximum(np.sqrt(np.diag(covariance)), _SETTLED * np.abs(new))
         if np.all(np.abs(last) <= settled):
+            if count is not None:
+                count.set_note(f"settled in {step_number} of at most {_OUTER_ITERATIONS} steps")
             break
     for i in which:
         starts[i] = fit_start(problem, physics, i, starts[i], _WARM_ITERATIONS).x
+        if count is not None:
+            count.update()
     # The last step is as far as the fit may still be from where it would settle: it counts
     # into the uncertainty with the data's own.
     return physics, starts, np.sqrt(np.diag(covariance) + last**2)

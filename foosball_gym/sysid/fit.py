@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from foosball_gym.progress import Progress
 from foosball_gym.sim.replay import BallReplay
 from foosball_gym.sysid.ball_fit import fit_ball
 from foosball_gym.sysid.drive_fit import drive_samples, fit_drives, history_for
@@ -27,18 +28,28 @@ BALL_BUDGET_S = 30.0
 MIN_DRIVE_STEPS = 30
 
 
-def fit_logs(paths: Sequence[str | Path], ball_budget_s: float = BALL_BUDGET_S) -> SysidResult:
+def fit_logs(
+    paths: Sequence[str | Path], ball_budget_s: float = BALL_BUDGET_S, progress: bool = False
+) -> SysidResult:
     """Fit the physics of the table the session logs ``paths`` were played on.
+
+    Args:
+        paths: session logs of ``foosball play --log``, all of one table.
+        ball_budget_s: the most time of the ball's stretches replayed whole.
+        progress: show the ball's fit going on standard error (:mod:`foosball_gym.progress`).
 
     Raises:
         LogError: a log cannot be fitted, one is from another table than the others, or the
             logs never show the ball clear of the rods long enough to fit it.
     """
-    return fit(read_logs(paths), ball_budget_s)
+    return fit(read_logs(paths), ball_budget_s, progress)
 
 
-def fit(logs: list[PlayLog], ball_budget_s: float = BALL_BUDGET_S) -> SysidResult:
-    """Fit the physics of the table ``logs`` (read by :func:`read_logs`) were played on."""
+def fit(
+    logs: list[PlayLog], ball_budget_s: float = BALL_BUDGET_S, progress: bool = False
+) -> SysidResult:
+    """Fit the physics of the table ``logs`` (read by :func:`read_logs`) were played on;
+    ``progress`` as :func:`fit_logs` takes it."""
     segments = ball_segments(logs)
     if not segments:
         names = ", ".join(log.path for log in logs)
@@ -50,7 +61,9 @@ def fit(logs: list[PlayLog], ball_budget_s: float = BALL_BUDGET_S) -> SysidResul
     first = logs[0]
     # Kept open with the fit: a plot of it replays the stretches again.
     replay = BallReplay(first.physics_hz, first.control_hz, first.contact_travel)
-    ball = fit_ball(within_budget(segments, ball_budget_s), replay)
+    # The ball's stretches take most of the time: each start fitted is counted.
+    with Progress(0, "sysid", "stretch fits", enabled=progress) as count:
+        ball = fit_ball(within_budget(segments, ball_budget_s), replay, count)
     samples = drive_samples(logs, history_for(first.physics_hz, first.control_hz))
     drives = None
     if samples is not None and len(samples) >= MIN_DRIVE_STEPS:
