@@ -180,6 +180,8 @@ def test_a_run_trains_evaluates_and_resumes(tmp_path, workers):
     assert result.timesteps >= 3000
     config = json.loads((out / "config.json").read_text())
     assert config["backend"] == "rllib" and config["num_workers"] == workers
+    # What this backend does not do is recorded as not done.
+    assert not (config["normalize"] or config["normalize_reward"] or config["fused_adam"])
     assert (out / "checkpoints" / "latest.json").exists()
     history = json.loads((out / "selfplay" / "history.json").read_text())
     assert [h["generation"] for h in history][:2] == [0, 1]

@@ -129,7 +129,9 @@ def train_rllib(
                 stacklevel=2,
             )
     check_rllib_config(config, num_workers)
-    config.normalize = False
+    # Recorded as run: RLlib scales neither observations nor rewards here, and its Adam is its own.
+    config.normalize = config.normalize_reward = False
+    config.adam_eps, config.fused_adam = None, False
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out} is a file, not a run directory")
     th.set_num_threads(config.torch_threads)
