@@ -249,6 +249,21 @@ BELOW = {
         "foosball_gym.game",
         "foosball_gym.training",
     },
+    # One module owns the play-log format; its readers (replay pages, system identification)
+    # read it there, not from the stack that writes it.
+    "foosball_gym.session_log": {
+        "foosball_gym.play",
+        "foosball_gym.sim",
+        "foosball_gym.envs",
+        "foosball_gym.training",
+    },
+    "foosball_gym.replay": {
+        "foosball_gym.play",
+        "foosball_gym.sysid",
+        "foosball_gym.sim",
+        "foosball_gym.training",
+    },
+    "foosball_gym.sysid": {"foosball_gym.play", "foosball_gym.replay"},
     "foosball_gym.policies": {
         "foosball_gym.envs",
         "foosball_gym.sim",

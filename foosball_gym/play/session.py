@@ -1,4 +1,5 @@
-"""Session logs: every pass of the loop as a JSON line, and replaying a log offline.
+"""Session logs: every pass of the loop as a JSON line (the format and its reader are
+:mod:`foosball_gym.session_log`), and replaying a log offline.
 
 A log holds what the camera measured, the drives' state and what the policy decided, so a
 session can be played back through the same estimator and policy to see, or check, what the
@@ -7,53 +8,30 @@ table did and why.
 
 from __future__ import annotations
 
-import json
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 
-from foosball_gym import user_json
 from foosball_gym.play.loop import LoopRecord
+from foosball_gym.session_log import SessionLogWriter, read_session_log
 
 
 class SessionLog:
-    """Writes one JSON line per :class:`LoopRecord`; a header line says what was played."""
+    """Writes one line per :class:`LoopRecord` in the format of :mod:`foosball_gym.session_log`;
+    a header line says what was played."""
 
     def __init__(self, path: str | Path, header: dict[str, Any]) -> None:
-        self.path = Path(path)
-        self._file: TextIO = self.path.open("w")
-        self._file.write(json.dumps({"header": header}) + "\n")
+        self._writer = SessionLogWriter(path, header)
+        self.path = self._writer.path
 
     def __call__(self, record: LoopRecord) -> None:
-        self._file.write(json.dumps(asdict(record)) + "\n")
+        self._writer.write(asdict(record))
 
     def close(self) -> None:
-        if not self._file.closed:
-            self._file.close()
-
-
-def read_session(path: str | Path) -> tuple[dict[str, Any], Iterator[dict[str, Any]]]:
-    """The header and the records of a session log."""
-    lines = Path(path).read_text(encoding="utf-8").splitlines()
-    if not lines:
-        raise ValueError(f"{path} is empty, not a session log")
-    first = user_json.loads(lines[0])
-    header = first.get("header") if isinstance(first, dict) else None
-    if header is None:
-        raise ValueError(f"{path} does not start with a session header")
-    if not isinstance(header, dict):
-        raise ValueError(f"{path}: its header is {type(header).__name__}, not an object")
-    return header, (_record(line, number) for number, line in enumerate(lines[1:], start=2))
-
-
-def _record(line: str, number: int) -> dict[str, Any]:
-    record = user_json.loads(line)
-    if not isinstance(record, dict):
-        raise ValueError(f"line {number} is {type(record).__name__}, not a loop record")
-    return record
+        self._writer.close()
 
 
 def replay(
@@ -74,8 +52,7 @@ def replay(
         Per record: (logged observation, replayed observation, logged action, replayed action).
     """
     out = []
-    _, records = read_session(path)
-    for rec in records:
+    for rec in read_session_log(path).records:
         if rec.get("new_ball"):
             estimator.new_ball()
         ball = tuple(rec["ball_measured"]) if rec["ball_measured"] is not None else None

@@ -14,11 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym.play.session import read_session
 from foosball_gym.replay.recording import Episode, Recording, nan_pair, rods_in_table_order
+from foosball_gym.session_log import SessionLogError, read_session_log
 
 
-class LogError(ValueError):
+class LogError(SessionLogError):
     """A file that is not a play session's log, or one damaged past reading."""
 
 
@@ -67,22 +67,16 @@ def recording_from_session(path: str | Path) -> Recording:
     """
     path = Path(path)
     try:
-        header, lines = read_session(path)
-        records = list(lines)
-    except ValueError as err:
-        raise LogError(f"{path} is not a foosball play --log session: {err}") from None
-    if not records:
-        raise LogError(f"{path} holds a session header and no loop records: nothing to replay")
-    names = header.get("observation") or []
-    if not isinstance(names, list):
-        raise LogError(f"{path}: the header's observation is no list of names")
+        read = read_session_log(path)
+    except SessionLogError as err:
+        raise LogError(str(err)) from None
+    header, records = read.header, read.records
+    names = header["observation"]
     try:
         ix, iy = names.index("ball_x"), names.index("ball_y")
     except ValueError:
         raise LogError(f"{path}: the header's observation has no ball_x, ball_y") from None
     env_id = header.get("env_id") or "a real table"
-    if not isinstance(env_id, str):
-        raise LogError(f"{path}: the header's env_id is {type(env_id).__name__}, not a string")
     try:
         rods = _rods(records)
     except (AttributeError, TypeError, ValueError, OverflowError) as err:

@@ -1,8 +1,9 @@
 """Session logs of ``foosball play --log``, read and checked for system identification.
 
-A log is a header line (what was played, on which table) and one line per pass of the loop
-(:class:`~foosball_gym.play.loop.LoopRecord`). What a fit needs of it is read into arrays: the
-camera's ball measurements and the time of their frames, and each drive's state and target.
+A log (:mod:`foosball_gym.session_log`, which reads and checks it) is a header line (what was
+played, on which table) and one line per pass of the loop. What a fit needs of it is read into
+arrays: the camera's ball measurements and the time of their frames, and each drive's state and
+target.
 A log that cannot be fitted (empty, cut off, not a session log, from another table than the
 others, without a ball in sight) is refused with a :class:`LogError` that says why in one
 line. Nothing here needs the simulator.
@@ -10,7 +11,6 @@ line. Nothing here needs the simulator.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -19,17 +19,16 @@ from typing import Any
 
 import numpy as np
 
-from foosball_gym import table, user_json
+from foosball_gym import table
 from foosball_gym.physics_options import PHYSICS_DEFAULTS, RANDOMISATION_BOUNDS, check_physics
+from foosball_gym.session_log import SessionLogError, read_session_log
 
 #: The environment options that make a simulated table's physics what it is: two simulated
 #: tables with different values are different tables.
 PHYSICS_OPTIONS = (*PHYSICS_DEFAULTS, *RANDOMISATION_BOUNDS)
-# What every loop record holds that a fit reads.
-_RECORD_KEYS = ("t", "frame_time", "ball_measured", "own_state", "targets")
 
 
-class LogError(ValueError):
+class LogError(SessionLogError):
     """A log that cannot be fitted; the message names the file and says why, in one line."""
 
 
@@ -120,46 +119,15 @@ def read_log(path: str | Path) -> PlayLog:
     Raises:
         LogError: naming the file and what is wrong with it.
     """
-    name = str(path)
-    file = Path(path)
-    if not file.exists():
-        raise LogError(f"{name}: no such file")
-    if not file.is_file():
-        raise LogError(f"{name} is not a file")
     try:
-        text = file.read_text()
-    except UnicodeDecodeError:
-        raise LogError(f"{name} is not a session log of foosball play --log: not text") from None
-    except OSError as err:
-        raise LogError(f"{name} cannot be read: {err.strerror}") from None
-    lines = text.splitlines()
-    if not any(line.strip() for line in lines):
-        raise LogError(f"{name} is empty, not a session log (foosball play --log FILE writes one)")
-    cut_off = not text.endswith("\n")
-    header = _header(name, lines[0], cut_off and len(lines) == 1)
-    records = []
-    for number, line in enumerate(lines[1:], start=2):
-        if not line.strip():
-            continue
-        try:
-            record = user_json.loads(line)
-        except ValueError as err:
-            if not isinstance(err, json.JSONDecodeError):
-                raise LogError(f"{name} line {number}: {err}") from None
-            if cut_off and number == len(lines):
-                raise LogError(
-                    f"{name} is truncated: its last line ({number}) was cut off while the "
-                    "session wrote it; delete that line to fit the rest"
-                ) from None
-            raise LogError(f"{name} line {number} is not JSON: the log is damaged") from None
-        records.append(_check_record(name, number, record))
-    if not records:
-        raise LogError(f"{name} holds no loops, only its header: the session ended at once")
-    log = _arrays(name, header, records)
+        read = read_session_log(path)
+    except SessionLogError as err:
+        raise LogError(str(err)) from None
+    log = _arrays(read.path, read.header, read.records)
     seen = int(np.isfinite(log.ball[:, 0]).sum())
     if not seen:
         raise LogError(
-            f"{name}: the camera saw no ball in any of its {log.loops} loops; nothing to fit"
+            f"{read.path}: the camera saw no ball in any of its {log.loops} loops; nothing to fit"
         )
     return log
 
@@ -193,77 +161,6 @@ def check_same_table(first: PlayLog, other: PlayLog) -> None:
 
 def _shown(value: Any) -> str:
     return "the default" if value is None else repr(value)
-
-
-def _header(name: str, line: str, cut_off: bool) -> dict[str, Any]:
-    """The header of a log, checked."""
-    not_a_log = f"{name} does not start with a session header: not a log of foosball play --log"
-    try:
-        first = user_json.loads(line)
-    except ValueError as err:
-        if not isinstance(err, json.JSONDecodeError):
-            raise LogError(f"{name} line 1: {err}") from None
-        if cut_off:
-            raise LogError(f"{name} is truncated: it was cut off in its header") from None
-        raise LogError(not_a_log) from None
-    header = first.get("header") if isinstance(first, dict) else None
-    if not isinstance(header, dict):
-        raise LogError(not_a_log)
-    config = header.get("table")
-    if not isinstance(config, dict) or not isinstance(config.get("joints"), list):
-        raise LogError(f"{name}: its header does not describe the table it was played on")
-    for joint in config["joints"]:
-        rod = joint.get("rod") if isinstance(joint, dict) else None
-        if rod not in table.ROD_BY_NAME or joint.get("joint") not in ("slide", "spin"):
-            raise LogError(
-                f"{name} is from another table: it has a drive on {rod!r}, which this table "
-                f"has not (rods: {', '.join(table.ROD_BY_NAME)})"
-            )
-    env_id = header.get("env_id")
-    if env_id is not None:
-        from foosball_gym.registration import ENV_IDS
-
-        if env_id not in ENV_IDS:
-            raise LogError(
-                f"{name} was played on {env_id!r}, which this foosball_gym does not know "
-                f"(another table, or another version); known: {', '.join(ENV_IDS)}"
-            )
-    if not isinstance(header.get("env_kwargs") or {}, dict):
-        raise LogError(f"{name}: its header's env_kwargs are not a mapping of options")
-    return header
-
-
-def _check_record(name: str, number: int, record: Any) -> dict[str, Any]:
-    """A loop record whose fields a fit reads are there and of their types."""
-    where = f"{name} line {number}"
-    if not isinstance(record, dict):
-        raise LogError(f"{where} is not a loop record of foosball play")
-    missing = [key for key in _RECORD_KEYS if key not in record]
-    if missing:
-        raise LogError(
-            f"{where} is not a loop record of foosball play: it has no {', '.join(missing)}"
-        )
-    if not _number(record["t"]) or not (
-        record["frame_time"] is None or _number(record["frame_time"])
-    ):
-        raise LogError(f"{where}: its t and frame_time must be numbers")
-    ball = record["ball_measured"]
-    if ball is not None and not (
-        isinstance(ball, list) and len(ball) == 2 and all(_number(v) for v in ball)
-    ):
-        raise LogError(f"{where}: its ball_measured must be null or two numbers, got {ball!r}")
-    state, targets = record["own_state"], record["targets"]
-    if not isinstance(state, dict) or not all(
-        isinstance(v, list) and len(v) == 2 and all(_number(x) for x in v) for v in state.values()
-    ):
-        raise LogError(f"{where}: its own_state must map joints to [position, velocity]")
-    if not isinstance(targets, dict) or not all(_number(v) for v in targets.values()):
-        raise LogError(f"{where}: its targets must map joints to numbers")
-    return record
-
-
-def _number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _arrays(name: str, header: dict[str, Any], records: list[dict[str, Any]]) -> PlayLog:
