@@ -172,6 +172,8 @@ def test_the_shared_options_are_declared_once_with_their_types_and_defaults():
                 assert params[name].annotation == declared[name], (entry.id, name)
         own = inspect.signature(cls.__init__).parameters
         assert not set(own) & set(fields), "a shared option written out again"
+        # A user's subclass lists them as its base does.
+        assert inspect.signature(type("Mine", (cls,), {})) == inspect.signature(cls)
 
 
 @pytest.mark.parametrize(

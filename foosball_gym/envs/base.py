@@ -9,7 +9,6 @@ actions, observations, reward terms, info, rendering, seeding and domain randomi
 from __future__ import annotations
 
 import copy
-import inspect
 import time
 from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar
@@ -199,13 +198,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     #: The shared options' defaults in this environment: :class:`SharedOptions`' own, but
     #: where its task wants others.
     defaults: ClassVar[SharedOptions] = DEFAULTS
-    # Set on each subclass: what inspect.signature gives for the class.
-    __signature__: ClassVar[inspect.Signature]
-
-    def __init_subclass__(cls, **kwargs: Any) -> None:
-        super().__init_subclass__(**kwargs)
-        # Every option with its type and default, the shared ones hidden by **shared: Unpack.
-        cls.__signature__ = env_options.option_signature(cls.__init__, cls.defaults)
+    # What inspect.signature gives for each subclass: every option with its type and default,
+    # the shared ones that **shared: Unpack hides among them.
+    __signature__ = env_options.OptionSignature()
 
     @classmethod
     def check_options(cls, task: Task, **shared: Unpack[GameOptions]) -> CheckedOptions:

@@ -24,6 +24,7 @@ import inspect
 import math
 import re
 import typing
+import weakref
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal, TypedDict
@@ -329,16 +330,36 @@ def check_stagnation(value: Any) -> int:
 # ---------------------------------------------------------------- what a class says
 
 
+class OptionSignature:
+    """An environment base class's ``__signature__``: for each subclass, what
+    :func:`option_signature` makes of it (made when first asked for, as
+    :func:`inspect.signature` asks); for the base class itself, None (its own)."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._owner = owner
+        self._made: weakref.WeakKeyDictionary[type, inspect.Signature] = weakref.WeakKeyDictionary()
+
+    def __get__(self, obj: object, cls: Any = None) -> inspect.Signature | None:
+        cls = type(obj) if cls is None else cls
+        if cls is self._owner:
+            return None
+        if cls not in self._made:
+            self._made[cls] = option_signature(cls.__init__, getattr(cls, "defaults", DEFAULTS))
+        return self._made[cls]
+
+
 def option_signature(init: Any, defaults: SharedOptions) -> inspect.Signature:
     """The signature of an environment class whose ``__init__`` is ``init``: its own keyword
-    arguments, then each shared option its ``**shared: Unpack[...]`` takes, with its type and
-    its default in ``defaults``. Unpack hides those from :func:`inspect.signature`; this lists
-    every option, as :func:`option_defaults`, ``foosball envs`` and the tests read them."""
+    arguments, then each shared option its ``**shared: Unpack[...]`` takes (any other
+    ``**shared``: :class:`GameOptions`), with its type and its default in ``defaults``. Unpack
+    hides those from :func:`inspect.signature`; this lists every option, as
+    :func:`option_defaults`, ``foosball envs`` and the tests read them."""
     own = inspect.signature(init, eval_str=True).parameters
-    params = [p for name, p in own.items() if name != "self" and p.kind is p.KEYWORD_ONLY]
+    params = [p for p in own.values() if p.kind is p.KEYWORD_ONLY]
     unpacked = [p for p in own.values() if p.kind is p.VAR_KEYWORD]
     if unpacked:
-        (declaration,) = typing.get_args(unpacked[0].annotation)
+        args = typing.get_args(unpacked[0].annotation)
+        declaration = args[0] if args and typing.is_typeddict(args[0]) else GameOptions
         types = typing.get_type_hints(declaration)
         if "opponent" not in types:
             # A task without an opponent takes only False (observation_options says why not).
