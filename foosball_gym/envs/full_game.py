@@ -9,6 +9,7 @@ from typing_extensions import Unpack
 from foosball_gym.envs.base import FoosballEnv
 from foosball_gym.envs.options import GameOptions, SharedOptions
 from foosball_gym.tasks.full_game import FullGameTask
+from foosball_gym.tasks.match import DEAD_BALL_STEPS
 
 
 class FullGameEnv(FoosballEnv):
@@ -101,9 +102,7 @@ class FullGameEnv(FoosballEnv):
         continuous: bool = False,
         first_to: int = 0,
         match_seconds: float | None = None,
-        # Half a second at rest out of reach: a rolling ball slower than 5 cm/s covers at most
-        # 2.5 cm, less than the gap between two rods' reaches.
-        dead_ball_steps: int = 30,
+        dead_ball_steps: int = DEAD_BALL_STEPS,
         **shared: Unpack[GameOptions],
     ) -> None:
         super().__init__(

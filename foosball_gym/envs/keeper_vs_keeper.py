@@ -9,6 +9,7 @@ from typing_extensions import Unpack
 from foosball_gym.envs.base import FoosballEnv
 from foosball_gym.envs.options import GameOptions, SharedOptions
 from foosball_gym.tasks.keeper_vs_keeper import KeeperVsKeeperTask
+from foosball_gym.tasks.match import DEAD_BALL_STEPS
 
 
 class KeeperVsKeeperEnv(FoosballEnv):
@@ -111,9 +112,7 @@ class KeeperVsKeeperEnv(FoosballEnv):
         continuous: bool = False,
         first_to: int = 0,
         match_seconds: float | None = None,
-        # Half a second at rest out of reach: a rolling ball slower than 5 cm/s covers at most
-        # 2.5 cm, less than the gap between two rods' reaches.
-        dead_ball_steps: int = 30,
+        dead_ball_steps: int = DEAD_BALL_STEPS,
         **shared: Unpack[GameOptions],
     ) -> None:
         super().__init__(
