@@ -141,7 +141,7 @@ def test_the_physics_options_are_checked_before_a_world_is_built(monkeypatch):
         raise AssertionError("a world was built")
 
     gym.make("Foosball-Block-v0", physics_hz=480, control_hz=120).close()
-    monkeypatch.setattr(foosball_gym.sim, "TableSim", no_world)
+    monkeypatch.setattr(foosball_gym.sim.TableSim, "__init__", no_world)
     for check in (
         lambda: gym.make("Foosball-Block-v0", physics_hz=250),
         lambda: check_env_options("Foosball-Block-v0", {"physics_hz": 250}),

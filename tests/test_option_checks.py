@@ -18,7 +18,7 @@ def no_world(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("a simulator was built")
 
-    monkeypatch.setattr(foosball_gym.sim, "TableSim", refuse)
+    monkeypatch.setattr(foosball_gym.sim.TableSim, "__init__", refuse)
 
 
 def test_training_start_up_checks_the_options_and_reads_the_task_without_a_simulator(no_world):
@@ -87,3 +87,24 @@ def test_a_dataset_with_a_bad_option_is_refused_before_anything_is_written(tmp_p
             still, "Foosball-Block-v0", "foosball/x-v0", {"gamma": 2}, data_path=tmp_path
         )
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("model", ["scripted", "builtin:block"])
+def test_foosball_play_builds_one_simulator_the_one_it_plays_on(monkeypatch, model):
+    pytest.importorskip("canopen")
+    if model.startswith("builtin:"):
+        pytest.importorskip("stable_baselines3")
+    from foosball_gym.cli import main
+
+    built = []
+    build = foosball_gym.sim.TableSim.__init__
+
+    def counted(self, *args, **kwargs):
+        built.append(args)
+        build(self, *args, **kwargs)
+
+    monkeypatch.setattr(foosball_gym.sim.TableSim, "__init__", counted)
+    argv = ["play", model, "--env", "Foosball-Block-v0", "--table", "sim", "--episodes", "1"]
+    # In lock-step: on simulated time, a busy machine trips no watchdog.
+    assert main([*argv, "--lockstep", "--camera", "320x180", "--no-status"]) == 0
+    assert len(built) == 1
