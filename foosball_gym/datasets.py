@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 
 from foosball_gym.progress import Progress
-from foosball_gym.registration import __version__, check_env_id
+from foosball_gym.registration import ENV_IDS, __version__, check_env_id, check_env_options
 from foosball_gym.table import PHYSICS_REVISION
 
 Policy = Callable[[np.ndarray], Any]
@@ -145,6 +145,8 @@ def record_dataset(
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a whole number, 0 or more, got {seed!r}")
     check_env_id(env_id)
+    if env_id in ENV_IDS:
+        check_env_options(env_id, env_kwargs)  # before the first episode, building nothing
     root = datasets_root(data_path)
     target = root / dataset_id
     check_replaceable(target, dataset_id, overwrite)

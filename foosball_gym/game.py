@@ -181,14 +181,7 @@ class Game:
         ``"scripted:N"`` rung N of its scripted ladder."""
         if self._opp_builder is None:
             raise ValueError(f"{type(self.task).__name__} has no opponent to set")
-        if isinstance(policy, str) and is_scripted(policy):
-            policy = self.scripted_opponent(parse_scripted(policy))
-        elif policy is not None and not callable(policy):
-            raise ValueError(
-                "an opponent must be a callable obs -> action, 'scripted' or 'scripted:N', "
-                f"got {policy!r}"
-            )
-        self._opponent = self.scripted_opponent() if policy is None else policy
+        self._opponent = resolve_opponent(self.task, self.interface.builder.names, policy)
 
     def scripted_opponent(self, level: int | None = None) -> Policy:
         """A scripted team for the away side, acting on its mirrored observation: the task's
@@ -307,6 +300,29 @@ class Game:
         memo[id(self)] = copied
         copied.__dict__.update(copy.deepcopy(self.__dict__, memo))
         return copied
+
+
+def resolve_opponent(task: Task, names: Sequence[str], policy: Policy | str | None) -> Policy:
+    """The away side's policy that ``policy`` names in ``task``, on the mirrored observation
+    (laid out as the home side's, whose entries are ``names``): itself where it is a callable,
+    the task's scripted team where it is None or ``"scripted"``, rung N of its ladder where it
+    is ``"scripted:N"``.
+
+    Raises:
+        ValueError: the task has no opponent, no such rung, or ``policy`` is none of these.
+    """
+    if not task.layout.opponent:
+        raise ValueError(f"{type(task).__name__} has no opponent to set")
+    if isinstance(policy, str) and is_scripted(policy):
+        # The mirrored observation is laid out as the home side's, so a team built on the
+        # home side's names plays the away rods of the same roles.
+        return task.scripted_level(parse_scripted(policy), list(names))
+    if policy is not None and not callable(policy):
+        raise ValueError(
+            "an opponent must be a callable obs -> action, 'scripted' or 'scripted:N', "
+            f"got {policy!r}"
+        )
+    return task.scripted_level(None, list(names)) if policy is None else policy
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
+import numpy as np
 from gymnasium.envs.registration import load_env_creator, register, registry
 
 from foosball_gym.policy_io.observations import OBSERVATION_OPTIONS, observation_options
@@ -29,6 +30,7 @@ from foosball_gym.tasks.score import ScoreTask
 
 if TYPE_CHECKING:
     from foosball_gym.envs.base import FoosballEnv
+    from foosball_gym.envs.options import CheckedOptions
 
 __version__ = "0.1.0"
 
@@ -126,18 +128,39 @@ def make_task(
     return task, options
 
 
-def check_env_options(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> None:
-    """Check options as the environment does: by making it (with no window) and closing it.
+def check_env_options(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> CheckedOptions:
+    """Check options as the environment does, building nothing (no simulator, no
+    environment): their names, types and ranges, the task's and the shared ones.
+
+    Returns:
+        The options checked, with the task, and the observation's and action's sizes.
 
     Raises:
         ValueError: ``env_id`` is not registered, or an option has a bad value.
         TypeError: an option the environment does not take.
     """
     check_env_id(env_id)
-    options = dict(env_kwargs or {})
-    if options.get("render_mode") == "human":
-        options["render_mode"] = None  # a valid mode, whose window the check does not need
-    gym.make(env_id, **options).close()
+    task, options = make_task(env_id, env_kwargs)
+    return cast("type[FoosballEnv]", env_class(env_id)).check_options(task, **options)
+
+
+def observation_size(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> int:
+    """The size of the observations of ``env_id`` with these options (gymnasium.make's own
+    keywords among them are left out), building nothing where ``env_id`` is one of
+    :data:`ENVS`; another registered environment is made to tell.
+
+    Raises:
+        ValueError: ``env_id`` is not registered, or an option has a bad value.
+        TypeError: an option the environment does not take.
+    """
+    if env_id not in _BY_ID:
+        env = gym.make(env_id, **(env_kwargs or {}))
+        shape = env.observation_space.shape
+        env.close()
+        return int(np.prod(shape or ()))
+    own = set(inspect.signature(gym.make).parameters)
+    options = {k: v for k, v in (env_kwargs or {}).items() if k not in own}
+    return check_env_options(env_id, options).observation_size
 
 
 def interface_of(task: Task, env_kwargs: Mapping[str, Any]) -> TaskInterface:
@@ -186,26 +209,25 @@ def describe_envs(env_id: str | None = None) -> str:
     Raises:
         ValueError: ``env_id`` is not registered; the message names the ids that are.
     """
-    from foosball_gym.envs.options import summary
+    from foosball_gym.envs.options import summary, type_name
 
     lines = []
     for entry in ENVS if env_id is None else [env_entry(env_id)]:
-        env = gym.make(entry.id)
-        cls = type(cast("FoosballEnv", env.unwrapped))
+        checked = check_env_options(entry.id)
+        cls = cast("type[FoosballEnv]", env_class(entry.id))
         lines.append(
-            f"{entry.id}  ({entry.max_episode_steps} steps, action {env.action_space.shape}"
-            f", observation {env.observation_space.shape})"
+            f"{entry.id}  ({entry.max_episode_steps} steps, action ({checked.action_size},)"
+            f", observation ({checked.observation_size},))"
         )
-        env.close()
         lines.append("    " + (cls.__doc__ or "").strip().splitlines()[0])
         if entry.task.ladder:
             levels = ", ".join(f"{i} {level.name}" for i, level in enumerate(entry.task.ladder))
             lines.append(f"    scripted ladder (scripted:N; scripted is the top): {levels}")
         grid, docs = cls.option_grid(), cls.argument_docs()
-        for name, default in cls.option_defaults().items():
+        for name, p in inspect.signature(cls).parameters.items():
             values = grid.get(name)
             allowed = f"  one of {', '.join(map(repr, values))}" if values else ""
-            lines.append(f"    {name} = {default!r}{allowed}")
+            lines.append(f"    {name}: {type_name(p.annotation)} = {p.default!r}{allowed}")
             lines += textwrap.wrap(
                 summary(docs[name]), 100, initial_indent=" " * 8, subsequent_indent=" " * 8
             )

@@ -400,8 +400,12 @@ def test_envs_lists_every_environment_with_its_options(capsys):
     out = capsys.readouterr().out
     for env_id in foosball_gym.ENV_IDS:
         assert env_id in out
-    assert "ball_start = 'resting'  one of 'resting', 'incoming'" in out
-    assert "continuous = False" in out
+    # Each option with its type and default, and the values it takes where they are few.
+    assert (
+        "ball_start: Literal['resting', 'incoming'] = 'resting'  one of 'resting', 'incoming'"
+    ) in out
+    assert "continuous: bool = False" in out
+    assert "rolling_resistance: float = 0.01" in out
 
 
 @needs_hardware
@@ -501,7 +505,7 @@ def test_envs_shows_one_environment_when_given_its_id(capsys):
     assert main(["envs", "Foosball-Score-v0"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("Foosball-Score-v0  (")
-    assert "ball_start = 'resting'" in out
+    assert "ball_start: Literal['resting', 'incoming'] = 'resting'" in out
     others = [env_id for env_id in foosball_gym.ENV_IDS if env_id != "Foosball-Score-v0"]
     assert not [env_id for env_id in others if env_id in out]
 
@@ -517,8 +521,8 @@ def test_envs_with_an_unknown_id_names_the_registered_ones(capsys):
 def test_envs_describes_each_option_without_sending_the_reader_to_another_environment(capsys):
     assert main(["envs"]) == 0
     out = capsys.readouterr().out
-    # An option's description is the indented line under "name = default".
-    described = re.findall(r"^    (\w+) = .*\n((?:        .*\n)+)", out, re.M)
+    # An option's description is the indented line under "name: type = default".
+    described = re.findall(r"^    (\w+): .* = .*\n((?:        .*\n)+)", out, re.M)
     assert len(described) > 50, out[:500]
     for name, text in described:
         assert not re.search(r"\bas \w+'s\b", text), (name, text)

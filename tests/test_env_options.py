@@ -10,6 +10,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 from foosball_gym import ENV_IDS
+from foosball_gym.registration import check_env_options
 
 
 def grid_cases():
@@ -72,6 +73,10 @@ def test_observation_sizes_follow_the_options(env_id, kwargs, size):
     try:
         assert env.observation_space.shape == (size,)
         assert env.reset(seed=0)[0].shape == (size,)
+        # The check that builds nothing knows it too, and the action's.
+        checked = check_env_options(env_id, kwargs)
+        assert checked.observation_size == size
+        assert (checked.action_size,) == env.action_space.shape
     finally:
         env.close()
 
@@ -145,6 +150,9 @@ def test_figurine_observation_follows_the_rod(make_env):
 def test_invalid_arguments_say_what_is_allowed(env_id, kwargs, message):
     with pytest.raises(ValueError, match=message):
         gym.make(env_id, **kwargs)
+    # The check that builds no simulator says the same.
+    with pytest.raises(ValueError, match=message):
+        check_env_options(env_id, kwargs)
 
 
 def test_bad_obstacle_positions_are_rejected(make_env):

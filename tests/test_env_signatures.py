@@ -3,8 +3,10 @@ and the one table of ids is what Gymnasium and the real table read."""
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import re
+import typing
 
 import gymnasium as gym
 import numpy as np
@@ -12,8 +14,14 @@ import pytest
 
 from foosball_gym import ENV_IDS, table
 from foosball_gym.envs.base import FoosballEnv
-from foosball_gym.envs.options import docstring_arguments
-from foosball_gym.registration import ENVS, env_class, make_task, task_interface
+from foosball_gym.envs.options import EnvOptions, GameOptions, SharedOptions, docstring_arguments
+from foosball_gym.registration import (
+    ENVS,
+    check_env_options,
+    env_class,
+    make_task,
+    task_interface,
+)
 
 # The options whose default is the task's own, not the one every environment shares.
 TASK_DEFAULTS = {"action_regularisation_weight", "opponent_prismatic_only", "stagnation_steps"}
@@ -62,7 +70,11 @@ def test_the_signature_lists_every_option_with_its_default(env_id):
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_an_unknown_option_names_every_option_there_is(env_id):
     names = inspect.signature(env_class(env_id)).parameters
-    for make in (lambda: gym.make(env_id, warp=3), lambda: task_interface(env_id, {"warp": 3})):
+    for make in (
+        lambda: gym.make(env_id, warp=3),
+        lambda: task_interface(env_id, {"warp": 3}),
+        lambda: check_env_options(env_id, {"warp": 3}),
+    ):
         with pytest.raises(TypeError, match="has no option 'warp'; allowed: ") as err:
             make()
         allowed = str(err.value).split("allowed: ")[1]
@@ -122,26 +134,46 @@ def test_options_every_environment_shares_default_alike():
     }
 
 
-def test_the_physics_options_are_checked_once(monkeypatch):
-    import sys
+def test_the_physics_options_are_checked_before_a_world_is_built(monkeypatch):
+    import foosball_gym.sim
 
-    from foosball_gym import physics_options
+    def no_world(*args, **kwargs):
+        raise AssertionError("a world was built")
 
-    calls = []
-    checked = physics_options.check_physics
-
-    def counted(*args, **kwargs):
-        calls.append(args)
-        return checked(*args, **kwargs)
-
-    gym.make("Foosball-Block-v0").close()  # every module that may check them is imported
-    for module in list(sys.modules.values()):
-        if getattr(module, "check_physics", None) is checked:
-            monkeypatch.setattr(module, "check_physics", counted)
     gym.make("Foosball-Block-v0", physics_hz=480, control_hz=120).close()
-    assert len(calls) == 1
-    with pytest.raises(ValueError, match="whole multiple of control_hz"):
-        gym.make("Foosball-Block-v0", physics_hz=250)
+    monkeypatch.setattr(foosball_gym.sim.TableSim, "__init__", no_world)
+    for check in (
+        lambda: gym.make("Foosball-Block-v0", physics_hz=250),
+        lambda: check_env_options("Foosball-Block-v0", {"physics_hz": 250}),
+    ):
+        with pytest.raises(ValueError, match="whole multiple of control_hz"):
+            check()
+
+
+def test_the_shared_options_are_declared_once_with_their_types_and_defaults():
+    """The typed declaration (what mypy and an editor read) and the defaults name the same
+    options with the same types, and every environment's signature lists them all with those
+    types and, but where its task says otherwise, those defaults."""
+    declared = typing.get_type_hints(GameOptions)
+    fields = {f.name: f for f in dataclasses.fields(SharedOptions)}
+    assert list(declared) == [*list(fields)[1:], "opponent"]  # opponent: games only
+    assert set(typing.get_type_hints(EnvOptions)) == set(declared) - {"opponent"}
+    hints = typing.get_type_hints(SharedOptions)
+    assert all(hints[name] == declared[name] for name in declared)
+    for entry in ENVS:
+        cls = env_class(entry.id)
+        params = inspect.signature(cls).parameters
+        two_player = entry.task().layout.opponent
+        shared = [name for name in params if name in fields]
+        assert shared == [n for n in fields if two_player or n != "opponent"], entry.id
+        for name in shared:
+            assert params[name].default == getattr(cls.defaults, name), (entry.id, name)
+            if two_player or name != "opponent_prismatic_only":
+                assert params[name].annotation == declared[name], (entry.id, name)
+        own = inspect.signature(cls.__init__).parameters
+        assert not set(own) & set(fields), "a shared option written out again"
+        # A user's subclass lists them as its base does.
+        assert inspect.signature(type("Mine", (cls,), {})) == inspect.signature(cls)
 
 
 @pytest.mark.parametrize(

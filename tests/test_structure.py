@@ -64,6 +64,23 @@ def test_a_tasks_interface_is_built_without_the_simulator():
     assert out.stdout.strip() == "10"
 
 
+def test_options_are_checked_without_the_simulator():
+    code = (
+        "import sys; from foosball_gym.registration import ENV_IDS, check_env_options;"
+        "sizes = [check_env_options(i).observation_size for i in ENV_IDS];"
+        "check_env_options('Foosball-FullGame-v0', {'estimated_state': True, 'residual': 0.5,"
+        " 'drive_speed_range': (0.5, 1.0), 'opponent': 'scripted:1', 'render_mode': 'human'});"
+        "bad = {'physics_hz': 250};"
+        "exec('try: check_env_options(ENV_IDS[0], bad)\\nexcept ValueError: pass');"
+        "assert 'pybullet' not in sys.modules, 'pybullet was imported';"
+        "assert not [m for m in sys.modules if m.startswith('foosball_gym.sim')];"
+        "print(sizes)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[6, 8, 10, 36]"
+
+
 def test_the_interface_is_the_environments_own():
     import gymnasium as gym
     import numpy as np

@@ -11,22 +11,27 @@ from __future__ import annotations
 import copy
 import time
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from typing_extensions import Unpack
 
 from foosball_gym import table
 from foosball_gym.envs import options as env_options
-from foosball_gym.envs.estimated import CameraNoise, EstimatedState
-from foosball_gym.envs.options import RENDER_MODES
-from foosball_gym.envs.rewards import TERMS, RewardComputer, RewardWeights
-from foosball_gym.envs.rod_errors import RodErrors
-from foosball_gym.envs.safety_layer import SafetyLayer, check_safety_layer
+from foosball_gym.envs.estimated import EstimatedState
+from foosball_gym.envs.options import (
+    DEFAULTS,
+    RENDER_MODES,
+    CheckedOptions,
+    GameOptions,
+    SharedOptions,
+    check_shared,
+)
+from foosball_gym.envs.rewards import TERMS, RewardComputer
+from foosball_gym.envs.safety_layer import SafetyLayer
 from foosball_gym.game import Game, Outcome, Policy, portable, unpacked
-from foosball_gym.physics_options import check_randomisation
-from foosball_gym.policy_io.observations import check_flag, observation_options
 from foosball_gym.policy_io.task import TaskInterface, check_action, residual_action
 from foosball_gym.tasks.base import Task, check_ball_position, check_ball_velocity
 
@@ -45,9 +50,14 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     Each environment's class (:class:`~foosball_gym.envs.block.BlockEnv`,
     :class:`~foosball_gym.envs.score.ScoreEnv`,
     :class:`~foosball_gym.envs.keeper_vs_keeper.KeeperVsKeeperEnv`,
-    :class:`~foosball_gym.envs.full_game.FullGameEnv`) lists its options in its signature, with
-    their defaults, and describes its task and its own options; the options several of them
-    take are described here.
+    :class:`~foosball_gym.envs.full_game.FullGameEnv`) writes out its task's own options in its
+    signature and takes the options every environment shares as ``**shared:
+    Unpack[EnvOptions]``, declared once with their types in
+    :class:`~foosball_gym.envs.options.EnvOptions` (:class:`~foosball_gym.envs.options.GameOptions`
+    with an opponent), their defaults those of :class:`~foosball_gym.envs.options.SharedOptions`
+    but where the class's ``defaults`` say otherwise. ``inspect.signature(EnvClass)`` lists them
+    all, with their types and defaults. The shared options are described here, the task's on
+    each class.
 
     ## Arguments
     Rewards (every term is also in `info["reward_<name>"]`; the reward is their sum):
@@ -185,101 +195,39 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         it does."""
         env_options.check_option_names(cls, names)
 
-    def __init__(
-        self,
-        task: Task,
-        *,
-        opponent: Policy | str | None,
-        goal_reward: float,
-        out_of_table_penalty: float,
-        ball_to_goal_weight: float,
-        figurine_to_ball_weight: float,
-        action_regularisation_weight: float,
-        shaping: str,
-        gamma: float,
-        joint_velocities: bool,
-        observe_figurines: bool,
-        opponent_prismatic_only: bool,
-        stagnation_steps: int,
-        ball_friction_range: tuple[float, float] | None,
-        ball_restitution_range: tuple[float, float] | None,
-        ball_mass_range: tuple[float, float] | None,
-        drive_gain_range: tuple[float, float] | None,
-        rolling_resistance_range: tuple[float, float] | None,
-        drive_speed_range: tuple[float, float] | None,
-        drive_accel_range: tuple[float, float] | None,
-        slide_offset_range: tuple[float, float] | None,
-        angle_offset_range: tuple[float, float] | None,
-        rod_angle_noise: float,
-        estimated_state: bool,
-        camera_noise: dict[str, Any] | None,
-        safety_layer: bool | None,
-        residual: float | tuple[float, ...],
-        render_mode: str | None,
-        render_width: int,
-        render_height: int,
-        physics_hz: int,
-        control_hz: int,
-        contact_travel: float,
-        rolling_resistance: float,
-    ) -> None:
+    #: The shared options' defaults in this environment: :class:`SharedOptions`' own, but
+    #: where its task wants others.
+    defaults: ClassVar[SharedOptions] = DEFAULTS
+    # What inspect.signature gives for each subclass: every option with its type and default,
+    # the shared ones that **shared: Unpack hides among them.
+    __signature__ = env_options.OptionSignature()
+
+    @classmethod
+    def check_options(cls, task: Task, **shared: Unpack[GameOptions]) -> CheckedOptions:
+        """The shared options checked for ``task`` as this environment checks them (the
+        others at its defaults), building nothing; see
+        :func:`~foosball_gym.registration.check_env_options`."""
+        return check_shared(task, cls.defaults, **shared)
+
+    def __init__(self, task: Task, **shared: Unpack[GameOptions]) -> None:
         self._closed = False
         self.task = task
         self.layout = layout = task.layout
-        self.render_mode, self.render_width, self.render_height = env_options.check_render(
-            render_mode, render_width, render_height
-        )
-        stagnation_steps = env_options.check_stagnation(stagnation_steps)
-        self.weights = RewardWeights(
-            goal=goal_reward,
-            out_of_table=out_of_table_penalty,
-            ball_to_goal=ball_to_goal_weight,
-            figurine_to_ball=figurine_to_ball_weight,
-            action_regularisation=action_regularisation_weight,
-            shaping=shaping,
-            gamma=gamma,
-        )
-        self.interface: TaskInterface = TaskInterface.create(
-            layout,
-            task.extras,
-            observation_options(
-                bool(layout.opponent),
-                joint_velocities=joint_velocities,
-                observe_figurines=observe_figurines,
-                opponent_prismatic_only=opponent_prismatic_only,
-            ),
-        )
+        checked = self.check_options(task, **shared)
+        self.render_mode, self.render_width, self.render_height = checked.render
+        self.weights = checked.weights
+        self.interface: TaskInterface = checked.interface
         self.observation_options = self.interface.builder.options
         self.obs_builder = self.interface.builder
         self.observation_space = self.obs_builder.space
-        self.randomisation = check_randomisation(
-            {
-                "ball_friction_range": ball_friction_range,
-                "ball_restitution_range": ball_restitution_range,
-                "ball_mass_range": ball_mass_range,
-                "drive_gain_range": drive_gain_range,
-                "rolling_resistance_range": rolling_resistance_range,
-                "drive_speed_range": drive_speed_range,
-                "drive_accel_range": drive_accel_range,
-            }
-        )
-        self._rod_errors = RodErrors(
-            self.interface.action_joints,
-            layout.rods,
-            slide_offset_range,
-            angle_offset_range,
-            rod_angle_noise,
-        )
+        self.randomisation = checked.randomisation
+        self._rod_errors = checked.rod_errors
         self._estimated: EstimatedState | None = None
-        if check_flag("estimated_state", estimated_state):
-            self._estimated = EstimatedState(
-                self.obs_builder, CameraNoise.from_dict(camera_noise), self.np_random
-            )
-        elif camera_noise is not None:
-            raise ValueError("camera_noise needs estimated_state=True")
+        if checked.camera_noise is not None:
+            self._estimated = EstimatedState(self.obs_builder, checked.camera_noise, self.np_random)
         self._n_act = self.interface.n_actions
         self.action_space = spaces.Box(-1.0, 1.0, shape=(self._n_act,), dtype=np.float32)
-        self.residual = env_options.check_residual(residual, self._n_act)
+        self.residual = checked.residual
         # Residual RL: the action corrects the scripted baseline, which sees what the agent saw.
         self._baseline = self.scripted_policy() if self.residual else None
         self._last_obs: np.ndarray | None = None
@@ -287,21 +235,22 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self._dynamics: dict[str, float] = {}
         self._rewards = RewardComputer(self.weights, [table.rod(r) for r in layout.controlled])
 
-        # Imported here: building a task's interface needs no simulator. The simulator checks
-        # the physics options.
+        # Imported here: checking the options and building a task's interface needs no
+        # simulator.
         from foosball_gym.sim import TableSim
 
+        physics_hz, control_hz, contact_travel, rolling_resistance = checked.physics
         self.sim = TableSim(
             layout.rods,
             physics_hz=physics_hz,
             control_hz=control_hz,
             contact_travel=contact_travel,
             rolling_resistance=rolling_resistance,
-            gui=render_mode == "human",
+            gui=self.render_mode == "human",
         )
         self.dt = self.sim.control_dt
         self._safety: SafetyLayer | None = None
-        if check_safety_layer(safety_layer, self._estimated is not None):
+        if checked.safety_layer:
             self._safety = SafetyLayer(
                 self.interface.action_joints, self.interface.action_scales, self.dt
             )
@@ -309,10 +258,14 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self._base_gains = (self.sim.slide_gain, self.sim.spin_gain)
         try:
             self.game = Game(
-                task, self.interface, self.sim, opponent=opponent, stagnation_steps=stagnation_steps
+                task,
+                self.interface,
+                self.sim,
+                opponent=checked.values.opponent,
+                stagnation_steps=checked.stagnation_steps,
             )
         except BaseException:
-            self.close()  # a bad opponent: the simulator is open already
+            self.close()  # the simulator is open already
             raise
         self._last_render = 0.0
         self._shown_score = ""

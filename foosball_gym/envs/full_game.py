@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import ClassVar
+
+from typing_extensions import Unpack
 
 from foosball_gym.envs.base import FoosballEnv
-from foosball_gym.game import Policy
+from foosball_gym.envs.options import GameOptions, SharedOptions
 from foosball_gym.tasks.full_game import FullGameTask
+from foosball_gym.tasks.match import DEAD_BALL_STEPS
 
 
 class FullGameEnv(FoosballEnv):
@@ -90,49 +93,17 @@ class FullGameEnv(FoosballEnv):
       state plays like `foosball play`, its targets shaped by the real table's safety layer.
     """
 
+    # A ball lying still for a second is a draw.
+    defaults: ClassVar[SharedOptions] = SharedOptions(stagnation_steps=60)
+
     def __init__(
         self,
         *,
         continuous: bool = False,
         first_to: int = 0,
         match_seconds: float | None = None,
-        # Half a second at rest out of reach: a rolling ball slower than 5 cm/s covers at most
-        # 2.5 cm, less than the gap between two rods' reaches.
-        dead_ball_steps: int = 30,
-        opponent: Policy | str | None = None,
-        goal_reward: float = 1000.0,
-        out_of_table_penalty: float = 1000.0,
-        ball_to_goal_weight: float = 0.0,
-        figurine_to_ball_weight: float = 0.0,
-        action_regularisation_weight: float = 0.0,
-        shaping: Literal["difference", "potential"] = "difference",
-        gamma: float = 0.99,
-        joint_velocities: bool = True,
-        observe_figurines: bool = False,
-        opponent_prismatic_only: bool = False,
-        # A ball lying still for a second is a draw.
-        stagnation_steps: int = 60,
-        ball_friction_range: tuple[float, float] | None = None,
-        ball_restitution_range: tuple[float, float] | None = None,
-        ball_mass_range: tuple[float, float] | None = None,
-        drive_gain_range: tuple[float, float] | None = None,
-        rolling_resistance_range: tuple[float, float] | None = None,
-        drive_speed_range: tuple[float, float] | None = None,
-        drive_accel_range: tuple[float, float] | None = None,
-        slide_offset_range: tuple[float, float] | None = None,
-        angle_offset_range: tuple[float, float] | None = None,
-        rod_angle_noise: float = 0.0,
-        estimated_state: bool = False,
-        camera_noise: dict[str, Any] | None = None,
-        safety_layer: bool | None = None,
-        residual: float | tuple[float, ...] = 0.0,
-        render_mode: str | None = None,
-        render_width: int = 320,
-        render_height: int = 180,
-        physics_hz: int = 240,
-        control_hz: int = 60,
-        contact_travel: float = 0.005,
-        rolling_resistance: float = 0.01,
+        dead_ball_steps: int = DEAD_BALL_STEPS,
+        **shared: Unpack[GameOptions],
     ) -> None:
         super().__init__(
             FullGameTask(
@@ -141,37 +112,5 @@ class FullGameEnv(FoosballEnv):
                 match_seconds=match_seconds,
                 dead_ball_steps=dead_ball_steps,
             ),
-            opponent=opponent,
-            goal_reward=goal_reward,
-            out_of_table_penalty=out_of_table_penalty,
-            ball_to_goal_weight=ball_to_goal_weight,
-            figurine_to_ball_weight=figurine_to_ball_weight,
-            action_regularisation_weight=action_regularisation_weight,
-            shaping=shaping,
-            gamma=gamma,
-            joint_velocities=joint_velocities,
-            observe_figurines=observe_figurines,
-            opponent_prismatic_only=opponent_prismatic_only,
-            stagnation_steps=stagnation_steps,
-            ball_friction_range=ball_friction_range,
-            ball_restitution_range=ball_restitution_range,
-            ball_mass_range=ball_mass_range,
-            drive_gain_range=drive_gain_range,
-            rolling_resistance_range=rolling_resistance_range,
-            drive_speed_range=drive_speed_range,
-            drive_accel_range=drive_accel_range,
-            slide_offset_range=slide_offset_range,
-            angle_offset_range=angle_offset_range,
-            rod_angle_noise=rod_angle_noise,
-            estimated_state=estimated_state,
-            camera_noise=camera_noise,
-            safety_layer=safety_layer,
-            residual=residual,
-            render_mode=render_mode,
-            render_width=render_width,
-            render_height=render_height,
-            physics_hz=physics_hz,
-            control_hz=control_hz,
-            contact_travel=contact_travel,
-            rolling_resistance=rolling_resistance,
+            **shared,
         )

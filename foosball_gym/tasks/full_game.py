@@ -10,7 +10,7 @@ from foosball_gym import table
 from foosball_gym.policies.ladder import FULL_GAME_LADDER
 from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start
-from foosball_gym.tasks.match import GameTask
+from foosball_gym.tasks.match import DEAD_BALL_STEPS, GameTask
 
 
 class FullGameTask(GameTask):
@@ -25,7 +25,7 @@ class FullGameTask(GameTask):
         continuous: bool = False,
         first_to: int = 0,
         match_seconds: float | None = None,
-        dead_ball_steps: int = 30,
+        dead_ball_steps: int = DEAD_BALL_STEPS,
     ) -> None:
         super().__init__(
             continuous=continuous,

@@ -10,7 +10,7 @@ from foosball_gym import table
 from foosball_gym.policies.ladder import KEEPER_LADDER
 from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start
-from foosball_gym.tasks.match import GameTask
+from foosball_gym.tasks.match import DEAD_BALL_STEPS, GameTask
 from foosball_gym.tasks.serves import resting_in_front_of
 
 
@@ -26,7 +26,7 @@ class KeeperVsKeeperTask(GameTask):
         continuous: bool = False,
         first_to: int = 0,
         match_seconds: float | None = None,
-        dead_ball_steps: int = 30,
+        dead_ball_steps: int = DEAD_BALL_STEPS,
     ) -> None:
         # A match of many serves: two sound keepers rarely score, so one serve a game leaves
         # most games drawn and tells little about which keeper is better.

@@ -23,6 +23,11 @@ def _whole(name: str, value: Any) -> int:
     return int(value)
 
 
+#: The games' ``dead_ball_steps``: half a second at rest out of reach. A rolling ball slower
+#: than 5 cm/s covers at most 2.5 cm in it, less than the gap between two rods' reaches.
+DEAD_BALL_STEPS = 30
+
+
 class GameTask(Task):
     """A game between two sides: one serve, or a match of many.
 

@@ -9,13 +9,15 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 
-from foosball_gym.registration import ENV_IDS, check_env_id, env_class
+from foosball_gym.registration import ENV_IDS, check_env_id, check_env_options
 from foosball_gym.training.run_dir.files import atomic_write_text, read_json
 from foosball_gym.training.run_dir.physics import physics_record
 from foosball_gym.training.selfplay.rule import SELFPLAY_RULES, check_rule, default_threshold
@@ -284,21 +286,25 @@ class TrainConfig:
                 f"got {self.video_every!r}"
             )
         if self.env_id in ENV_IDS:
-            # Before gym.make, which would add its own sentence to the names allowed.
-            env_class(self.env_id).check_option_names(self.env_kwargs)
-        env = gym.make(self.env_id, **self.env_kwargs)  # raises on a bad env option
-        try:
-            two_player = bool(cast("FoosballEnv", env.unwrapped).layout.opponent)
-            if self.self_play and not two_player:
-                raise ValueError(
-                    f"{self.env_id} has no opponent; self-play needs a two-player task"
-                )
-            if self.self_play is None:
-                self.self_play = two_player
-            if self.selfplay_scripted_levels:
-                self._check_levels(cast("FoosballEnv", env.unwrapped))
-        finally:
-            env.close()
+            # Checked as the environment checks them, without building one.
+            checked = check_env_options(self.env_id, self.env_kwargs)
+            names = list(checked.interface.builder.names)
+            two_player = checked.two_player
+            levels: Callable[[int], object] = partial(checked.task.scripted_level, names=names)
+        else:
+            # Another registered environment: only making it says what it takes.
+            env = gym.make(self.env_id, **self.env_kwargs)
+            try:
+                foosball = cast("FoosballEnv", env.unwrapped)
+                two_player, levels = bool(foosball.layout.opponent), foosball.scripted_opponent
+            finally:
+                env.close()
+        if self.self_play and not two_player:
+            raise ValueError(f"{self.env_id} has no opponent; self-play needs a two-player task")
+        if self.self_play is None:
+            self.self_play = two_player
+        if self.selfplay_scripted_levels:
+            self._check_levels(levels)
         if self.selfplay_gate and not self.self_play:
             raise ValueError(
                 f"selfplay_gate judges self-play's replacements; {self.env_id} trains without "
@@ -311,7 +317,9 @@ class TrainConfig:
             if not self.env_kwargs.get("continuous"):
                 self.env_kwargs.setdefault("stagnation_steps", 0)
 
-    def _check_levels(self, env: FoosballEnv) -> None:
+    def _check_levels(self, scripted_level: Callable[[int], object]) -> None:
+        """Check selfplay_scripted_levels against ``scripted_level``, which makes the
+        scripted team of a rung of the task's ladder or raises ValueError."""
         levels = self.selfplay_scripted_levels
         if isinstance(levels, str | bytes) or not all(
             isinstance(n, int) and not isinstance(n, bool) for n in levels
@@ -327,7 +335,7 @@ class TrainConfig:
             )
         for level in levels:
             try:
-                env.scripted_opponent(level)
+                scripted_level(level)
             except ValueError as e:
                 raise ValueError(f"selfplay_scripted_levels: {e}") from None
         self.selfplay_scripted_levels = tuple(levels)

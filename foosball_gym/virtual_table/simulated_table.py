@@ -49,14 +49,8 @@ from foosball_gym.hardware.config import (
     TableConfig,
     simulated_joint,
 )
-from foosball_gym.physics_options import (
-    PHYSICS_DEFAULTS,
-    RANDOMISATION_BOUNDS,
-    check_physics,
-    check_randomisation,
-)
 from foosball_gym.policy_io.task import Joint, TaskInterface
-from foosball_gym.registration import interface_of, make_task
+from foosball_gym.registration import check_env_options
 from foosball_gym.sim import TableSim
 from foosball_gym.sysid.excitation import CALIBRATION_SERVE_S, calibration_serve, check_serves
 from foosball_gym.tasks.base import Start
@@ -166,18 +160,19 @@ class SimulatedTable:
         serves: str = "task",
         camera_errors: bool = True,
     ) -> None:
-        task, options = make_task(env_id, env_kwargs)
-        physics = check_physics(*(options.get(k, d) for k, d in PHYSICS_DEFAULTS.items()))
+        # Checked as the environment checks them, before anything is built.
+        checked = check_env_options(env_id, env_kwargs)
+        task = checked.task
         self.serves = check_serves(serves)
-        self._randomisation = check_randomisation(
-            {name: options.get(name) for name in RANDOMISATION_BOUNDS}
+        self._randomisation = checked.randomisation
+        physics_hz, control_hz, contact_travel, rolling_resistance = checked.physics
+        self.sim = TableSim(
+            task.layout.rods,
+            physics_hz=physics_hz,
+            control_hz=control_hz,
+            contact_travel=contact_travel,
+            rolling_resistance=rolling_resistance,
         )
-        stagnation = options.get("stagnation_steps", 0)
-        # As the environment checks it.
-        if not isinstance(stagnation, (int, np.integer)) or stagnation < 0:
-            raise ValueError(f"stagnation_steps must be a non-negative integer, got {stagnation!r}")
-        physics_options: dict[str, Any] = dict(zip(PHYSICS_DEFAULTS, physics))
-        self.sim = TableSim(task.layout.rods, **physics_options)
         self._base_gains = (self.sim.slide_gain, self.sim.spin_gain)
         self.dynamics: dict[str, float] = {}
         self.realtime = bool(realtime)
@@ -189,7 +184,7 @@ class SimulatedTable:
         self.late_steps = 0
         # The camera errs as the task's camera model says a real one does: its picture shows
         # the ball and the opponent's rods where a detector would place them.
-        self.camera_noise = CameraNoise.from_dict(options.get("camera_noise"))
+        self.camera_noise = CameraNoise.from_dict(checked.values.camera_noise)
         if not camera_errors:
             self.camera_noise = dataclasses.replace(
                 self.camera_noise, position_std=0.0, rod_std=0.0, drop_rate=0.0
@@ -209,7 +204,7 @@ class SimulatedTable:
         self._thread: threading.Thread | None = None
         try:
             self.game = Game(
-                task, interface_of(task, options), self.sim, stagnation_steps=int(stagnation)
+                task, checked.interface, self.sim, stagnation_steps=checked.stagnation_steps
             )
             rods = task.layout.rods
             self._opponent_slides = [rods.index(rod) for rod in task.layout.opponent]

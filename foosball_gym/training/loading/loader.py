@@ -137,13 +137,9 @@ class LoadedPolicy:
 
     def check_env(self, env_id: str, env_kwargs: dict[str, Any] | None = None) -> None:
         """Raise ValueError where the environment's observations do not fit the policy."""
-        import gymnasium as gym
+        from foosball_gym.registration import observation_size
 
-        env = gym.make(env_id, **(env_kwargs or {}))
-        shape = env.observation_space.shape
-        assert shape is not None  # the environments observe a Box
-        size = int(np.prod(shape))
-        env.close()
+        size = observation_size(env_id, env_kwargs)
         expected = self.policy.observation_size
         if size != expected:
             trained = f" of {self.env_id}" if self.env_id else ""
