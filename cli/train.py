@@ -149,11 +149,19 @@ def add_parser(subparsers: Any) -> None:
         default=None,
         help="do not normalise observations",
     )
-    p.add_argument(
+    reward = p.add_mutually_exclusive_group()
+    reward.add_argument(
         "--normalize-reward",
+        dest="normalize_reward",
         action="store_true",
         default=None,
-        help=fields_by_name["normalize_reward"].metadata["help"],
+        help=fields_by_name["normalize_reward"].metadata["help"] + " (the default)",
+    )
+    reward.add_argument(
+        "--no-normalize-reward",
+        dest="normalize_reward",
+        action="store_false",
+        help="train on the rewards as the environment gives them",
     )
     p.add_argument(
         "--selfplay-sampled",
@@ -197,7 +205,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 _SWITCH_SPELLING = {
     "self_play": "--self-play/--no-self-play",
     "normalize": "--no-normalize",
-    "normalize_reward": "--normalize-reward",
+    "normalize_reward": "--normalize-reward/--no-normalize-reward",
     "selfplay_sampled": "--selfplay-sampled",
 }
 

@@ -269,3 +269,12 @@ def test_a_run_from_before_a_setting_existed_keeps_the_value_it_trained_with(tmp
     new = TrainConfig(env_id="Foosball-Block-v0")
     new.save(tmp_path / "config.json")
     assert TrainConfig.load(tmp_path / "config.json") == new
+
+
+def test_the_rewards_scaled_by_default_can_be_left_as_they_are_from_the_command_line():
+    assert config_of(["Foosball-Block-v0"]).normalize_reward
+    assert not config_of(["Foosball-Block-v0", "--no-normalize-reward"]).normalize_reward
+    papers = config_of(["Foosball-Block-v0", "--config", "builtin:paper-ppo", "--normalize-reward"])
+    assert papers.normalize_reward and papers.net_arch == (256, 128, 64)
+    with pytest.raises(SystemExit):
+        config_of(["Foosball-Block-v0", "--normalize-reward", "--no-normalize-reward"])
