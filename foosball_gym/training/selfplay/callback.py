@@ -62,10 +62,11 @@ class SelfPlayCallback(BaseCallback):
             ``foosball eval`` and ``load_policy`` read like any model.
         stop: the run's signal stop: a signal during the gate's games ends them (and the
             run) where it lands, the replacement not judged.
-        stall_games, fallback: after this many games without a new opponent the run has
-            stalled; it says so (printed, ``selfplay/stalls`` in TensorBoard, a line in
-            ``stalls.jsonl``) and judges by the ``fallback`` rule from then on (see
+        stall_games: after this many games without a new opponent the run has stalled; it
+            says so (printed, ``selfplay/stalls`` in TensorBoard, a line in ``stalls.jsonl``)
+            and judges by the ``fallback`` rule from then on (see
             :class:`~foosball_gym.training.selfplay.rule.ReplacementRule`; 0: never).
+        fallback: the rule a stall switches to; None keeps the rule.
 
     TensorBoard gets the window's rates and ``selfplay/elo``, the learner's rating against its
     opponents (see :class:`~foosball_gym.training.selfplay.rule.ReplacementRule`). Games
