@@ -802,3 +802,48 @@ def test_foosball_play_exits_on_sigterm_with_a_line_and_no_traceback(tmp_path):
     assert play.returncode == 128 + signal.SIGTERM, err
     assert "Traceback" not in err
     assert err.strip().splitlines()[-1] == "stopped: terminated by SIGTERM"
+
+
+class FakeFrame:
+    """A frame of the file ``filename``, as a signal handler is given it."""
+
+    def __init__(self, filename: str) -> None:
+        self.f_code = type("Code", (), {"co_filename": filename})()
+
+
+def test_a_sigterm_landing_in_threading_code_is_taken_up_once_the_thread_is_out_of_it():
+    import threading
+
+    from foosball_gym.play.termination import catch_termination
+
+    restore = catch_termination()
+    try:
+        handler = signal.getsignal(signal.SIGTERM)
+        # Entering a lock-guarded block: raising here would leave the lock held for good.
+        handler(signal.SIGTERM, FakeFrame(threading.__file__))
+        assert signal.getitimer(signal.ITIMER_REAL)[0] > 0, "taken up again soon"
+        with pytest.raises(Terminated) as info:
+            deadline = time.monotonic() + 5
+            while time.monotonic() < deadline:
+                time.sleep(0.001)  # out of threading's code: the held signal lands here
+        assert info.value.signum == signal.SIGTERM
+        # Told once: the next SIGTERM is ignored while the drives stop.
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+    finally:
+        restore()
+
+
+def test_a_sigterm_is_held_out_of_threading_code_only_so_long(monkeypatch):
+    import threading
+
+    from foosball_gym.play import termination
+
+    monkeypatch.setattr(termination, "HOLD_LIMIT_S", 0.0)
+    restore = termination.catch_termination()
+    try:
+        handler = signal.getsignal(signal.SIGTERM)
+        with pytest.raises(Terminated):
+            handler(signal.SIGTERM, FakeFrame(threading.__file__))
+        assert signal.getitimer(signal.ITIMER_REAL)[0] == 0
+    finally:
+        restore()
