@@ -296,6 +296,18 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             raise ValueError(f"{type(self).__name__} has no opponent to set")
         self.game.set_opponent(policy)
 
+    def set_serves(self, **options: Any) -> None:
+        """Change the incoming shots' options (``speed_range``, ``serve_x_range``,
+        ``serve_y_range``, ``bank_share``, ``double_bank_share``, ``beside_mouth``,
+        ``rebound_share``) from the next reset on, checked as the constructor checks them: a
+        curriculum over serves (``TrainConfig.curriculum``).
+
+        Raises:
+            ValueError: the task serves no shots (Score with the ball at rest, the games), or
+                an option is unknown or out of range.
+        """
+        self.task.set_serves(**options)
+
     def scripted_opponent(self, level: int | None = None) -> Policy:
         """A scripted team for the away side, acting on the mirrored observation: the default
         opponent, or rung ``level`` of the game's scripted ladder."""

@@ -18,6 +18,7 @@ from foosball_gym import table
 from foosball_gym.policies.ladder import Level, Policy, level_of
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.task import Layout
+from foosball_gym.tasks.serves import Shots
 
 # The fastest ball the simulated table is built for (m/s): real play's fastest shots, which
 # it keeps out of figurines, walls and posts (SPEC: 15-20 m/s). Served balls and balls placed
@@ -123,6 +124,8 @@ class Task:
 
     layout: Layout
     extras: tuple[str, ...] = ()
+    #: What the task serves from, where it serves shots (see :meth:`served_shots`).
+    shots: Shots
     reset_options: ClassVar[tuple[str, ...]] = ("ball_position", "ball_velocity")
     #: True where a goal (or a dead ball) re-serves instead of ending the episode.
     continues_after_goal: bool = False
@@ -145,6 +148,25 @@ class Task:
     def success(self, goals_for: int, goals_against: int) -> bool:
         """Whether the task is met with this score so far."""
         raise NotImplementedError
+
+    def served_shots(self) -> Shots | None:
+        """The shots the task serves its episodes from, if it serves shots."""
+        return None
+
+    def set_serves(self, **options: Any) -> None:
+        """Change serve options (``speed_range``, ``serve_x_range``, ...: those of
+        ``serves.SERVE_FIELDS``) for the episodes from the next reset on.
+
+        Raises:
+            ValueError: the task serves no shots, or an option is unknown or out of range.
+        """
+        shots = self.served_shots()
+        if shots is None:
+            raise ValueError(
+                f"{type(self).__name__.removesuffix('Task')} with these options serves no shots "
+                "whose options could change (Block does, and Score with ball_start='incoming')"
+            )
+        self.shots = shots.changed(**options)
 
     def match_over(self, goals_for: int, goals_against: int) -> bool:
         """Whether a match that goes on after goals is decided by this score (a first-to-N

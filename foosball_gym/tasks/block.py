@@ -56,6 +56,9 @@ class BlockTask(Task):
             velocity = ball_velocity
         return Start([0.0], [0.0], position, velocity)
 
+    def served_shots(self) -> Shots:
+        return self.shots
+
     def scripted_policy(self, names: Sequence[str], precise_state: bool = True) -> ScriptedKeeper:
         return ScriptedKeeper(names)
 

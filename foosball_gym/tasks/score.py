@@ -116,6 +116,9 @@ class ScoreTask(Task):
                     "of its figurines along y"
                 )
 
+    def served_shots(self) -> Shots | None:
+        return self.shots if self.ball_start == "incoming" else None
+
     def scripted_policy(self, names: Sequence[str], precise_state: bool = True) -> ScriptedTeam:
         """The scripted keeper, deflecting incoming balls to the goal (or striking them where
         it cannot: blocked ones trickle out of reach) and aiming past the obstacles.

@@ -9,10 +9,9 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table
-from foosball_gym.tasks.base import MAX_BALL_SPEED
 
-# A shot no faster than the table is built for.
-SHOT_SPEED_LIMITS = (1e-3, MAX_BALL_SPEED)
+# A shot no faster than the table is built for (the tasks' MAX_BALL_SPEED).
+SHOT_SPEED_LIMITS = (1e-3, table.RESOLVED_SPEED)
 # The spec's resting ball: 0.497 m from the centre line, +-5 mm, in front of a keeper.
 REST_X, REST_X_JITTER, REST_Y = 0.497, 0.005, 0.1
 
@@ -70,6 +69,17 @@ BANK_LAST_BOUNCE_X = -0.45
 BANK_AIM_HALF = table.GOAL_MOUTH_HALF - 0.03
 BANK_AIM_OFFSET = 0.0085
 SERVE_X_LIMITS = (-0.1, table.BALL_LIMIT_X - 0.1)
+# The serve options a run may change from one episode to the next (a curriculum), by the
+# Shots field each sets.
+SERVE_FIELDS = {
+    "speed_range": "speed_range",
+    "serve_x_range": "x_range",
+    "serve_y_range": "y_range",
+    "bank_share": "bank_share",
+    "double_bank_share": "double_bank_share",
+    "beside_mouth": "beside_mouth",
+    "rebound_share": "rebound_share",
+}
 SERVE_Y_LIMITS = (-table.BALL_LIMIT_Y, table.BALL_LIMIT_Y)
 
 
@@ -162,6 +172,30 @@ class Shots:
             check_choice("bank_aim", bank_aim, BANK_AIMS),
             beside,
             check_share("rebound_share", rebound_share),
+        )
+
+    def options(self) -> dict[str, Any]:
+        """The serve options, by the names the environments take, that give these shots."""
+        return {name: getattr(self, attr) for name, attr in SERVE_FIELDS.items()}
+
+    def changed(self, **options: Any) -> Shots:
+        """These shots with some serve options changed, checked as :meth:`checked` checks
+        them; a ValueError names an option no serve has, with those that are."""
+        unknown = sorted(set(options) - set(SERVE_FIELDS))
+        if unknown:
+            raise ValueError(
+                f"unknown serve option {unknown[0]!r}; allowed: {', '.join(SERVE_FIELDS)}"
+            )
+        given = {**self.options(), **options}
+        return Shots.checked(
+            given["speed_range"],
+            given["serve_x_range"],
+            given["serve_y_range"],
+            given["bank_share"],
+            given["double_bank_share"],
+            self.bank_aim,
+            given["beside_mouth"],
+            given["rebound_share"],
         )
 
     def start(

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, cast
 import gymnasium as gym
 
 from foosball_gym.registration import ENV_IDS, check_env_id, check_env_options
+from foosball_gym.training.curriculum import check_curriculum
 from foosball_gym.training.run_dir.files import atomic_write_text, read_json
 from foosball_gym.training.run_dir.physics import physics_record
 from foosball_gym.training.selfplay.rule import SELFPLAY_RULES, check_rule, default_threshold
@@ -160,6 +161,14 @@ class TrainConfig:
         "the replacement rule a stall switches to (none: keep the rule); significant needs "
         "no win rate, only more wins than losses among decisive games, beyond chance",
     )
+    curriculum: dict[str, Any] = field(
+        default_factory=dict,
+        metadata={
+            "help": "serve options (speed_range, serve_x_range, ...) with the values a run "
+            "starts from; they move to the run's own over curriculum_steps"
+        },
+    )
+    curriculum_steps: int = _field(0, "steps over which the curriculum's serves become the run's")
     eval_freq: int = _field(25_000, "evaluate every this many steps")
     eval_episodes: int = _field(50, "seeded episodes per evaluation")
     checkpoint_freq: int = _field(50_000, "write a checkpoint every this many steps")
@@ -299,6 +308,12 @@ class TrainConfig:
                 two_player, levels = bool(foosball.layout.opponent), foosball.scripted_opponent
             finally:
                 env.close()
+        if self.curriculum or self.curriculum_steps:
+            if self.env_id not in ENV_IDS:
+                raise ValueError(
+                    f"a curriculum over serves needs one of {', '.join(ENV_IDS)}, not {self.env_id}"
+                )
+            check_curriculum(self.env_id, self.env_kwargs, self.curriculum, self.curriculum_steps)
         if self.self_play and not two_player:
             raise ValueError(f"{self.env_id} has no opponent; self-play needs a two-player task")
         if self.self_play is None:

@@ -43,6 +43,7 @@ from foosball_gym.training.sb3.callbacks import (
     rollout_steps,
     steps_run,
 )
+from foosball_gym.training.sb3.curriculum import ServeCurriculum
 from foosball_gym.training.sb3.model import build_model, load_checkpoint
 from foosball_gym.training.sb3.pretrain import pretrain
 from foosball_gym.training.sb3.teacher import TeacherCallback
@@ -267,6 +268,11 @@ def _train(
                 teacher=config.teacher,
             )
         )
+    if config.curriculum:
+        curriculum = ServeCurriculum(config)
+        # Before learn() resets the environments, so that their first episodes follow it too.
+        curriculum.apply(venv, done_steps)
+        own.append(curriculum)
     evaluations = EvalCurveCallback(config, out, wall_offset, stop=stop)
     own.append(evaluations)
     if config.video_every is not None:
