@@ -70,6 +70,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "teacher": {"metavar": "scripted|MODEL"},
     "target_kl": {"type": float},
     "log_std_init": {"type": float},
+    "ent_coef": {"type": float},
     "eval_freq": {"type": positive_int},
     "eval_episodes": {"type": positive_int},
     "checkpoint_freq": {"type": positive_int},

@@ -153,6 +153,7 @@ def test_the_rl_zoo_file_carries_the_settings_file_of_each_task(env_id):
     }
     assert entry.pop("env_kwargs", {}) == config.env_kwargs
     assert entry.pop("target_kl", None) == config.target_kl
+    assert entry.pop("ent_coef", 0.0) == config.ent_coef
     names = ("n_envs", "n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "clip_range")
     assert entry == {name: getattr(config, name) for name in names}
     assert config.algo == "ppo"

@@ -365,3 +365,25 @@ def test_the_defaults_take_pytorchs_fused_adam_and_the_papers_settings_keep_sb3s
         finally:
             venv.close()
         assert (defaults["eps"], bool(defaults["fused"])) == (eps, fused)
+
+
+def test_the_entropy_weight_reaches_ppo_and_a_bad_one_is_refused(capsys):
+    from foosball_gym.training.sb3.model import build_model
+    from foosball_gym.training.sb3.vec_env import make_env
+
+    config = TrainConfig("Foosball-Block-v0", n_envs=1, ent_coef=0.01)
+    config.check()
+    venv = make_env(config)
+    try:
+        assert build_model(config, venv, None).ent_coef == 0.01
+    finally:
+        venv.close()
+    for bad, message in [
+        ({"ent_coef": -0.1}, "0 or more"),
+        ({"algo": "sac", "ent_coef": 0.1}, "PPO"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            TrainConfig("Foosball-Block-v0", **bad).check()
+    with pytest.raises(SystemExit):
+        main(["train", "Foosball-Block-v0", "--ent-coef", "x"])
+    assert "--ent-coef" in capsys.readouterr().err

@@ -90,6 +90,7 @@ class TrainConfig:
     clip_range: float = _field(0.2, "PPO's clip range")
     # e^-1 of the half range: SB3's 0 explores so widely that Block's keeper never settles.
     log_std_init: float = _field(-1.0, "PPO's initial log standard deviation of actions")
+    ent_coef: float = _field(0.0, "PPO's weight of the policy's entropy in its loss")
     adam_eps: float | None = _field(
         1e-8, "Adam's epsilon (None: SB3's own, 1e-5 for PPO; PyTorch's default is 1e-8)"
     )
@@ -260,6 +261,12 @@ class TrainConfig:
             raise ValueError(f"gae_lambda must lie in [0, 1], got {self.gae_lambda}")
         if not 0 < self.clip_range < math.inf:
             raise ValueError(f"clip_range must be a positive number, got {self.clip_range}")
+        if not 0 <= self.ent_coef < math.inf:
+            raise ValueError(f"ent_coef must be a number, 0 or more, got {self.ent_coef}")
+        if self.ent_coef and self.algo != "ppo":
+            raise ValueError(
+                f"ent_coef weighs PPO's entropy; {self.algo} tunes its own: leave it at 0"
+            )
         if not math.isfinite(self.log_std_init):
             raise ValueError(f"log_std_init must be a finite number, got {self.log_std_init}")
         if self.selfplay_threshold is None:

@@ -118,7 +118,7 @@ def build_config(
             use_kl_loss=False,
             vf_clip_param=math.inf,
             vf_loss_coeff=0.5,
-            entropy_coeff=0.0,
+            entropy_coeff=config.ent_coef,
             grad_clip=0.5,
             grad_clip_by="global_norm",
         )

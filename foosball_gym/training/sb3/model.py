@@ -62,6 +62,7 @@ def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
             gae_lambda=config.gae_lambda,
             clip_range=config.clip_range,
             target_kl=config.target_kl,
+            ent_coef=config.ent_coef,
             policy_kwargs=policy_kwargs,
             **common,
         )
