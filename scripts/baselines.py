@@ -69,9 +69,7 @@ TASKS = {
         (500_000, 1_000_000, 2_000_000, 4_000_000),
     ),
     "score-incoming": Task(
-        "Foosball-Score-v0",
-        "builtin:score-incoming-scratch",
-        (500_000, 1_000_000, 2_000_000, 4_000_000),
+        "Foosball-Score-v0", "builtin:score-incoming-scratch", (500_000, 1_000_000, 2_000_000)
     ),
     "score-obstacles": Task(
         "Foosball-Score-v0", "builtin:score-obstacles-scratch", (300_000, 1_000_000, 3_000_000)
