@@ -616,3 +616,49 @@ def test_the_extra_check_finds_a_package_the_train_extra_lacks(tmp_path):
     setup_cfg = tmp_path / "setup.cfg"
     setup_cfg.write_text("\n".join(line for line in text.splitlines() if "filterpy" not in line))
     assert undeclared_imports(setup_cfg) == {"foosball_gym.estimation.kalman": {"filterpy"}}
+
+
+# The packages that moved into real_table/, by their old names: foosball_gym.old_paths keeps
+# those names importing for users, with a warning; the project itself no longer uses them.
+OLD_PATH = re.compile(
+    r"foosball_gym[./](hardware|vision|play|sysid|virtual_table)\b"
+    r"|from foosball_gym import [\w, ()]*\b(hardware|vision|play|sysid|virtual_table)\b"
+)
+# What the project is made of (text files only), and the two files that name the old paths on
+# purpose: the finder that maps them, and the test that they still import.
+PROJECT = ("foosball_gym", "cli", "urdf", "tests", "benchmarks", "scripts", "docs", ".ci")
+TOP_FILES = ("README.md", "mkdocs.yml", "setup.cfg", "tox.ini", "pyproject.toml", "ruff.toml")
+TEXT = {".py", ".md", ".yml", ".yaml", ".cfg", ".ini", ".toml", ".ipynb", ".txt", ".sh", ""}
+NAMING_THEM = {"foosball_gym/old_paths.py", "tests/test_old_paths.py"}
+
+
+def old_path_uses(root: Path) -> list[str]:
+    """Each ``file:line`` under ``root`` that names a moved package by its old path."""
+    files = [root / name for name in TOP_FILES if (root / name).exists()]
+    for folder in PROJECT:
+        files += [p for p in (root / folder).rglob("*") if p.is_file() and p.suffix in TEXT]
+    found = []
+    for path in files:
+        relative = path.relative_to(root).as_posix()
+        if relative in NAMING_THEM or "__pycache__" in path.parts:
+            continue
+        for number, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+            if OLD_PATH.search(line):
+                found.append(f"{relative}:{number}")
+    return found
+
+
+def test_nothing_in_the_project_uses_an_old_path():
+    assert old_path_uses(PACKAGE.parent) == []
+
+
+def test_the_old_path_check_finds_an_old_path(tmp_path):
+    package = "foosball_gym"  # written apart, so this file does not name an old path itself
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "page.md").write_text(f"::: {package}.real_table.vision\n")
+    (tmp_path / "cli").mkdir()
+    (tmp_path / "cli" / "play.py").write_text(
+        f"import {package}.real_table.play\nfrom {package} import table, vision\n"
+    )
+    (tmp_path / "mkdocs.yml").write_text(f"- {package}/virtual_table/drive.py\n")
+    assert old_path_uses(tmp_path) == ["mkdocs.yml:1", "cli/play.py:2"]
