@@ -27,8 +27,8 @@ import numpy as np
 
 from foosball_gym import table
 from foosball_gym.evaluation import evaluate, wilson_interval
-from foosball_gym.hardware.safety import SafetyError
-from foosball_gym.play.stack import play_sim
+from foosball_gym.real_table.hardware.safety import SafetyError
+from foosball_gym.real_table.play.stack import play_sim
 from foosball_gym.registration import scripted_policy
 from foosball_gym.sim import TableSim
 

@@ -44,17 +44,17 @@ from collections.abc import Callable
 
 import numpy as np
 
-from foosball_gym.hardware import (
+from foosball_gym.real_table.hardware import (
     BusConfig,
     JointConfig,
     SafetyError,
     TableConfig,
     WatchdogTripped,
 )
-from foosball_gym.hardware.cia402.protocol import CW_QUICK_STOP
-from foosball_gym.hardware.drives import TableDrives
+from foosball_gym.real_table.hardware.cia402.protocol import CW_QUICK_STOP
+from foosball_gym.real_table.hardware.drives import TableDrives
+from foosball_gym.real_table.virtual import SimulatedDrives
 from foosball_gym.sim import TableSim
-from foosball_gym.virtual_table import SimulatedDrives
 
 SLIDE = ("home_keeper", "slide")
 SPIN = ("home_keeper", "spin")
@@ -208,9 +208,9 @@ def stop_and_close(table: RealTimeTable) -> Times:
 
 def frozen_camera_play_real(table: RealTimeTable) -> Times:
     from foosball_gym.camera import CameraModel
-    from foosball_gym.play import stack
+    from foosball_gym.real_table.play import stack
+    from foosball_gym.real_table.vision import CameraCalibration
     from foosball_gym.registration import task_interface
-    from foosball_gym.vision import CameraCalibration
 
     config = table.config
     model = CameraModel(160, 90)
@@ -248,9 +248,9 @@ def frozen_camera_play_real(table: RealTimeTable) -> Times:
 
 def frozen_camera_play_sim(seed: int) -> Times:
     """``play_sim`` in real time; 40 loops in, the camera process is stopped."""
-    from foosball_gym.play.stack import play_sim
-    from foosball_gym.virtual_table import simulated_table
-    from foosball_gym.virtual_table.camera_process import CameraProcess
+    from foosball_gym.real_table.play.stack import play_sim
+    from foosball_gym.real_table.virtual import simulated_table
+    from foosball_gym.real_table.virtual.camera_process import CameraProcess
 
     tables: list = []
     fed: list[float] = []
@@ -298,8 +298,8 @@ def frozen_camera_play_sim(seed: int) -> Times:
 
 def frozen_picture_play_sim(seed: int) -> Times:
     """``play_sim`` in real time; 40 loops in, the camera gives its last picture again."""
-    from foosball_gym.play import stack
-    from foosball_gym.virtual_table import simulated_table
+    from foosball_gym.real_table.play import stack
+    from foosball_gym.real_table.virtual import simulated_table
 
     tables: list = []
     fed: list[float] = []
@@ -356,9 +356,9 @@ MASTER = textwrap.dedent(
     """
     import sys, time
     import canopen
-    from foosball_gym.hardware import BusConfig, JointConfig, TableConfig
-    from foosball_gym.hardware.drives import TableDrives
-    from foosball_gym.play.termination import Terminated, catch_termination
+    from foosball_gym.real_table.hardware import BusConfig, JointConfig, TableConfig
+    from foosball_gym.real_table.hardware.drives import TableDrives
+    from foosball_gym.real_table.play.termination import Terminated, catch_termination
 
     group, port = sys.argv[1], int(sys.argv[2])
     config = TableConfig(

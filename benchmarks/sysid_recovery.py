@@ -22,11 +22,11 @@ import json
 import time
 from pathlib import Path
 
-from foosball_gym.hardware.safety import SafetyError
-from foosball_gym.play.stack import play_sim
+from foosball_gym.real_table.hardware.safety import SafetyError
+from foosball_gym.real_table.play.stack import play_sim
+from foosball_gym.real_table.sysid.excitation import CALIBRATION_SERVE_S
+from foosball_gym.real_table.sysid.fit import fit_logs
 from foosball_gym.registration import scripted_policy
-from foosball_gym.sysid.excitation import CALIBRATION_SERVE_S
-from foosball_gym.sysid.fit import fit_logs
 from foosball_gym.table import CONTROL_HZ
 
 ENV_ID = "Foosball-Block-v0"

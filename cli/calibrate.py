@@ -9,7 +9,7 @@ from typing import Any
 
 from .common import CliError, LibraryDefault, given, grid, show_size
 
-CALIBRATE_TABLE = "foosball_gym.play.stack:calibrate_table"
+CALIBRATE_TABLE = "foosball_gym.real_table.play.stack:calibrate_table"
 
 
 def add_parser(subparsers: Any) -> None:
@@ -52,12 +52,12 @@ def run(args: argparse.Namespace) -> int:
     try:
         import cv2
 
-        from foosball_gym.play.stack import calibrate_table
+        from foosball_gym.real_table.play.stack import calibrate_table
     except ImportError as err:
         raise CliError(f'{err}; install the hardware extra: pip install -e ".[hardware]"') from None
-    from foosball_gym.hardware.config import ConfigError, load_config, save_config
-    from foosball_gym.vision import OpenCVSource
-    from foosball_gym.vision.calibration import read_image
+    from foosball_gym.real_table.hardware.config import ConfigError, load_config, save_config
+    from foosball_gym.real_table.vision import OpenCVSource
+    from foosball_gym.real_table.vision.calibration import read_image
 
     try:
         config = load_config(args.table)

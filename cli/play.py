@@ -24,12 +24,12 @@ from .common import (
     size,
 )
 
-PLAY_SIM = "foosball_gym.play.stack:play_sim"
+PLAY_SIM = "foosball_gym.real_table.play.stack:play_sim"
 # A camera's frame takes a few milliseconds to be read out at the least, and one that comes
 # half a second late shows a ball long gone; below 1 ms, a number meant in seconds is likelier.
 MIN_LATENCY_MS = 1.0
 MAX_LATENCY_MS = 500.0
-# As foosball_gym.sysid.excitation names them (which imports numpy: not at --help).
+# As foosball_gym.real_table.sysid.excitation names them (which imports numpy: not at --help).
 SERVE_PATTERNS = ("task", "calibration")
 
 
@@ -41,7 +41,7 @@ class _CameraDefault(LibraryDefault):
 
     def __str__(self) -> str:
         try:
-            from foosball_gym.play.stack import LOCKSTEP_CAMERA, REALTIME_CAMERA
+            from foosball_gym.real_table.play.stack import LOCKSTEP_CAMERA, REALTIME_CAMERA
         except ImportError:
             return "play_sim's default"
         return (
@@ -226,7 +226,7 @@ def _chosen_policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
 
 def _check_human(env_id: str, env_kwargs: dict[str, Any], human: str, rod: str | None) -> None:
     """Fail where a person cannot play ``human`` in the environment."""
-    from foosball_gym.play.human import human_rod
+    from foosball_gym.real_table.play.human import human_rod
     from foosball_gym.registration import task_interface
 
     try:
@@ -237,14 +237,14 @@ def _check_human(env_id: str, env_kwargs: dict[str, Any], human: str, rod: str |
 
 def run(args: argparse.Namespace) -> int:
     try:
-        from foosball_gym.play.stack import play_real, play_sim
-        from foosball_gym.play.termination import Terminated, catch_termination
+        from foosball_gym.real_table.play.stack import play_real, play_sim
+        from foosball_gym.real_table.play.termination import Terminated, catch_termination
     except ImportError as err:
         raise CliError(f'{err}; install the hardware extra: pip install -e ".[hardware]"') from None
-    from foosball_gym.hardware.config import ConfigError, load_config
-    from foosball_gym.hardware.safety import SafetyError
+    from foosball_gym.real_table.hardware.config import ConfigError, load_config
+    from foosball_gym.real_table.hardware.safety import SafetyError
+    from foosball_gym.real_table.virtual.viewer_process import WindowError
     from foosball_gym.registration import task_interface
-    from foosball_gym.virtual_table.viewer_process import WindowError
 
     human = args.human_rod or ("keeper" if args.human else None)
     gui = args.gui or human is not None
@@ -263,7 +263,7 @@ def run(args: argparse.Namespace) -> int:
             "run under xvfb-run to try it without one"
         )
     if human is not None:
-        from foosball_gym.play.human import key_map_text
+        from foosball_gym.real_table.play.human import key_map_text
 
         print(
             f"You play the away {human.removeprefix('away_')}, defending the goal "

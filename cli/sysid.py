@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None:
         _require("matplotlib", "--plot", "train")
         _check_plot_format(args.plot)
-    from foosball_gym.sysid import LogError, read_logs
+    from foosball_gym.real_table.sysid import LogError, read_logs
 
     try:
         logs = read_logs(args.logs)
@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
             f"{logs[0].path} does not name the environment it was played in (a real table's "
             "log): give the environment of --config with --env ENV_ID"
         )
-    from foosball_gym.sysid.fit import fit
+    from foosball_gym.real_table.sysid.fit import fit
 
     try:
         result = fit(logs, progress=True)
@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
         Path(args.config).write_text(result.config_text(args.env))
         written.append(args.config)
     if args.plot:
-        from foosball_gym.sysid.plot import plot_fit
+        from foosball_gym.real_table.sysid.plot import plot_fit
 
         plot_fit(result, args.plot)
         written.append(args.plot)

@@ -7,9 +7,12 @@ from __future__ import annotations
 
 from typing import Any
 
+from foosball_gym import old_paths
 from foosball_gym.registration import ENV_IDS, __version__, register_envs
 
 register_envs()
+# The real-table packages' names from before they moved into real_table/ (for one release).
+old_paths.install()
 
 
 def load_policy(spec: Any, trust: bool = False) -> Any:

@@ -2,7 +2,7 @@
 
 Both faces of the simulation use it: the Gymnasium environment (:mod:`foosball_gym.envs`),
 which adds actions, observations and rewards, and the simulated real table
-(:mod:`foosball_gym.virtual_table`), whose learner's rods are moved by simulated CAN drives
+(:mod:`foosball_gym.real_table.virtual`), whose learner's rods are moved by simulated CAN drives
 instead. The game only calls the :class:`~foosball_gym.sim.TableSim` it is given.
 """
 
@@ -160,8 +160,8 @@ class Game:
         self, position: tuple[float, float], velocity: tuple[float, float], rolling: bool = False
     ) -> None:
         """A new ball where the caller says (a calibration serve: see
-        :mod:`foosball_gym.sysid.excitation`), rolling without slipping or (``rolling`` False)
-        sliding without spin; the rods stay where they are and the score is 0-0."""
+        :mod:`foosball_gym.real_table.sysid.excitation`), rolling without slipping or (``rolling``
+        False) sliding without spin; the rods stay where they are and the score is 0-0."""
         self.sim.place_ball(position, velocity, rolling=rolling)
         self._begin()
 

@@ -1,13 +1,13 @@
 """The session log of ``foosball play --log``: its format, its one writer and its one checked
 reader.
 
-A log is a header line, ``{"header": {...}}``: what was played (``env_id`` where the table is
-the simulated one, ``env_kwargs``, the names of the ``observation``) and on which table (its
+A log is a header line, ``{"header": {...}}``: what was played (``env_id`` where the table is the
+simulated one, ``env_kwargs``, the names of the ``observation``) and on which table (its
 configuration: the drives' joints and the bus). Then one JSON object per pass of the loop, a
-:class:`~foosball_gym.play.loop.LoopRecord` as a mapping. ``foosball play`` writes it with
-:class:`SessionLogWriter`; replay pages, system identification and the tests read it with
-:func:`read_session_log`, which refuses a file that is no such log in one line naming the file
-and the line. Nothing here needs the simulator or the play stack.
+:class:`~foosball_gym.real_table.play.loop.LoopRecord` as a mapping. ``foosball play`` writes it
+with :class:`SessionLogWriter`; replay pages, system identification and the tests read it with
+:func:`read_session_log`, which refuses a file that is no such log in one line naming the file and
+the line. Nothing here needs the simulator or the play stack.
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ import numpy as np
 
 from foosball_gym import load_policy, table
 from foosball_gym.evaluation import evaluate
-from foosball_gym.play.human import KEY_HINTS
+from foosball_gym.real_table.play.human import KEY_HINTS
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "images"
 BROWSER_FLAGS = [
@@ -83,7 +83,7 @@ def window_shot(view: str, path: Path) -> None:
     from Xlib import X
     from Xlib.display import Display
 
-    from foosball_gym.virtual_table.viewer_process import ViewerProcess
+    from foosball_gym.real_table.virtual.viewer_process import ViewerProcess
 
     positions, ball = mid_game_scene()
     viewer = ViewerProcess([rod.name for rod in table.RODS], view)

@@ -382,7 +382,7 @@ def test_play_refuses_a_table_configuration_outside_the_safe_limits(
 ):
     import yaml
 
-    from foosball_gym.hardware.config import shipped_table
+    from foosball_gym.real_table.hardware.config import shipped_table
 
     data = yaml.safe_load(shipped_table().read_text())
     data[field] = value
@@ -419,7 +419,7 @@ def test_play_runs_the_scripted_keeper_on_the_simulated_table(capsys):
 
 @needs_hardware
 def test_play_and_calibrate_help_show_the_library_defaults(capsys):
-    from foosball_gym.play.stack import LOCKSTEP_CAMERA, REALTIME_CAMERA, calibrate_table
+    from foosball_gym.real_table.play.stack import LOCKSTEP_CAMERA, REALTIME_CAMERA, calibrate_table
 
     with pytest.raises(SystemExit):
         main(["play", "--help"])
@@ -440,10 +440,10 @@ def test_calibrate_finds_the_intrinsics_from_chessboards_and_the_pose_from_the_f
 ):
     import cv2
 
-    from foosball_gym.hardware.config import load_config, save_config, shipped_table
+    from foosball_gym.real_table.hardware.config import load_config, save_config, shipped_table
+    from foosball_gym.real_table.virtual.simulated_table import SimulatedTable, virtual_table_config
+    from foosball_gym.real_table.vision import CameraCalibration
     from foosball_gym.registration import task_interface
-    from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
-    from foosball_gym.vision import CameraCalibration
 
     table = SimulatedTable(
         "Foosball-Block-v0", {}, virtual_table_config(task_interface("Foosball-Block-v0"))

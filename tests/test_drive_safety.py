@@ -2,8 +2,8 @@
 and every stop braking to standstill before the power goes off.
 
 The drives are the simulated C5-E look-alikes on python-can's virtual bus; the master is
-:class:`~foosball_gym.hardware.drives.TableDrives`. Times come from the simulated drives' event
-logs, on the table's clock. Latency figures: ``benchmarks/stop_latency.py``.
+:class:`~foosball_gym.real_table.hardware.drives.TableDrives`. Times come from the simulated drives'
+event logs, on the table's clock. Latency figures: ``benchmarks/stop_latency.py``.
 """
 
 from __future__ import annotations
@@ -16,8 +16,14 @@ import time
 import numpy as np
 import pytest
 
-from foosball_gym.hardware import BusConfig, DriveFault, JointConfig, TableConfig, WatchdogTripped
-from foosball_gym.hardware.cia402.protocol import (
+from foosball_gym.real_table.hardware import (
+    BusConfig,
+    DriveFault,
+    JointConfig,
+    TableConfig,
+    WatchdogTripped,
+)
+from foosball_gym.real_table.hardware.cia402.protocol import (
     ABORT_CONNECTION_OPTION_CODE,
     CONSUMER_HEARTBEAT_TIME,
     CW_DISABLE_VOLTAGE,
@@ -32,10 +38,10 @@ from foosball_gym.hardware.cia402.protocol import (
     SW_TARGET_REACHED,
     state_name,
 )
-from foosball_gym.hardware.drives import DEFAULT_MASTER_NODE_ID, TableDrives
+from foosball_gym.real_table.hardware.drives import DEFAULT_MASTER_NODE_ID, TableDrives
+from foosball_gym.real_table.virtual import SimulatedDrives
+from foosball_gym.real_table.virtual.drive_states import QUICK_STOP, SOD
 from foosball_gym.sim import TableSim
-from foosball_gym.virtual_table import SimulatedDrives
-from foosball_gym.virtual_table.drive_states import QUICK_STOP, SOD
 
 SLIDE = ("home_keeper", "slide")
 SPIN = ("home_keeper", "spin")
@@ -349,7 +355,7 @@ def test_every_stop_brakes_to_standstill_before_the_power_goes_off(realtime_tabl
 def test_a_tripped_latch_is_reported_only_once_its_stop_has_been_sent():
     # The command guard trips the latch on its own thread; the play loop, checking meanwhile,
     # must not see the error (and go on to say the drives stopped) before the stop is out.
-    from foosball_gym.hardware.safety import SafetyLatch
+    from foosball_gym.real_table.hardware.safety import SafetyLatch
 
     stopping, release, sent = threading.Event(), threading.Event(), threading.Event()
 

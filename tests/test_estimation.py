@@ -9,9 +9,9 @@ import pytest
 from foosball_gym import table
 from foosball_gym.camera import CameraModel
 from foosball_gym.estimation import BallFilter, RodFilter, TableStateEstimator, bounce
+from foosball_gym.real_table.vision import CameraCalibration, ColourBallDetector
 from foosball_gym.registration import task_interface
 from foosball_gym.sim import TableSim
-from foosball_gym.vision import CameraCalibration, ColourBallDetector
 
 W, H = 640, 360
 DT = 1 / 60

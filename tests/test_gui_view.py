@@ -65,7 +65,7 @@ def window(display):
     that shows a scene and text and takes a screenshot."""
     from Xlib.display import Display
 
-    from foosball_gym.virtual_table.viewer_process import ViewerProcess
+    from foosball_gym.real_table.virtual.viewer_process import ViewerProcess
 
     opened = []
     connection = Display(display)
@@ -157,7 +157,7 @@ DT = 1.0 / table.CONTROL_HZ
 
 
 def test_from_the_players_side_the_keys_follow_that_screen():
-    from foosball_gym.play.human import KICK_ANGLE, LIFT_ANGLE, SLIDE_SPEED, KeyboardRod
+    from foosball_gym.real_table.play.human import KICK_ANGLE, LIFT_ANGLE, SLIDE_SPEED, KeyboardRod
 
     rod = KeyboardRod("away_keeper", DT, view="away")
     none = frozenset()
@@ -180,7 +180,7 @@ def test_from_the_players_side_the_keys_follow_that_screen():
 
 
 def test_a_person_plays_from_the_top_or_their_own_side_only():
-    from foosball_gym.play.human import KeyboardRod, key_map_text
+    from foosball_gym.real_table.play.human import KeyboardRod, key_map_text
 
     with pytest.raises(ValueError, match="top or away, not 'home'"):
         KeyboardRod("away_keeper", DT, view="home")

@@ -15,7 +15,7 @@ import time
 import numpy as np
 import pytest
 
-from foosball_gym.hardware import (
+from foosball_gym.real_table.hardware import (
     BusConfig,
     ConfigError,
     DriveFault,
@@ -27,12 +27,16 @@ from foosball_gym.hardware import (
     save_config,
     shipped_table,
 )
-from foosball_gym.hardware.cia402.protocol import CW_QUICK_STOP, OPERATION_ENABLED, state_name
-from foosball_gym.hardware.drives import TableDrives
-from foosball_gym.hardware.safety import JointLimits, TargetLimiter, Watchdog
+from foosball_gym.real_table.hardware.cia402.protocol import (
+    CW_QUICK_STOP,
+    OPERATION_ENABLED,
+    state_name,
+)
+from foosball_gym.real_table.hardware.drives import TableDrives
+from foosball_gym.real_table.hardware.safety import JointLimits, TargetLimiter, Watchdog
+from foosball_gym.real_table.virtual import SimulatedDrives
 from foosball_gym.sim import TableSim
 from foosball_gym.table import SLIDE_MAX_SPEED, SPIN_LIMIT, SPIN_MAX_SPEED, rod
-from foosball_gym.virtual_table import SimulatedDrives
 
 SLIDE = ("home_keeper", "slide")
 SPIN = ("home_keeper", "spin")
@@ -124,8 +128,8 @@ def make_table():
 
 def test_the_driver_imports_neither_pybullet_nor_the_simulator():
     code = (
-        "import sys; from foosball_gym.hardware import TableDrives, load_config;"
-        "import foosball_gym.hardware.cia402, foosball_gym.hardware.safety;"
+        "import sys; from foosball_gym.real_table.hardware import TableDrives, load_config;"
+        "import foosball_gym.real_table.hardware.cia402, foosball_gym.real_table.hardware.safety;"
         "bad = {'pybullet', 'foosball_gym.sim'} & set(sys.modules);"
         "assert not bad, bad"
     )

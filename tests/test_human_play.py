@@ -15,7 +15,7 @@ import pytest
 
 from foosball_gym import table
 from foosball_gym.cli import main
-from foosball_gym.play.human import (
+from foosball_gym.real_table.play.human import (
     KICK_ANGLE,
     KICK_TIME,
     LIFT_ANGLE,
@@ -192,7 +192,7 @@ def test_play_in_the_gui_without_a_display_is_a_one_line_error(option, capsys, m
 
 @needs_hardware
 def test_the_window_of_a_table_without_a_display_says_so(monkeypatch):
-    from foosball_gym.virtual_table.viewer_process import ViewerProcess, WindowError
+    from foosball_gym.real_table.virtual.viewer_process import ViewerProcess, WindowError
 
     monkeypatch.setenv("DISPLAY", ":7999")  # no X server there
     with pytest.raises(WindowError, match="could not open its window on the display ':7999'"):
@@ -339,7 +339,7 @@ def test_a_person_plays_the_away_keeper_in_the_window_with_real_key_events(
     wall clock itself (``--realtime``) PyBullet's window, whose loop never idles, left a
     machine of two cores shared with other work too slow to keep the loop's 50 ms watchdog fed.
     """
-    from foosball_gym.play import stack
+    from foosball_gym.real_table.play import stack
 
     real_play_sim = stack.play_sim
     chosen: dict = {}
@@ -395,7 +395,7 @@ def test_the_window_writes_the_score_above_the_table(display):
     from Xlib import X
     from Xlib.display import Display
 
-    from foosball_gym.virtual_table.viewer_process import ViewerProcess
+    from foosball_gym.real_table.virtual.viewer_process import ViewerProcess
 
     def dark_pixels(window) -> int:
         """Near-black pixels in the part of ``window`` on the screen."""

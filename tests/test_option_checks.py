@@ -67,7 +67,7 @@ def test_the_simulated_table_refuses_what_the_environment_refuses_before_buildin
     no_world, kwargs, message
 ):
     pytest.importorskip("canopen")
-    from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
+    from foosball_gym.real_table.virtual.simulated_table import SimulatedTable, virtual_table_config
 
     env_id = "Foosball-Block-v0"
     config = virtual_table_config(task_interface(env_id))

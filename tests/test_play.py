@@ -18,13 +18,13 @@ import pytest
 pytest.importorskip("canopen")
 
 from foosball_gym.cli import main  # noqa: E402
-from foosball_gym.hardware.config import load_config, save_config, shipped_table  # noqa: E402
-from foosball_gym.play.session import replay  # noqa: E402
-from foosball_gym.play.stack import build_perception, play_sim  # noqa: E402
+from foosball_gym.real_table.hardware.config import load_config, save_config, shipped_table  # noqa: E402
+from foosball_gym.real_table.play.session import replay  # noqa: E402
+from foosball_gym.real_table.play.stack import build_perception, play_sim  # noqa: E402
+from foosball_gym.real_table.virtual.simulated_table import SimulatedTable, virtual_table_config  # noqa: E402
+from foosball_gym.real_table.vision import CameraCalibration  # noqa: E402
 from foosball_gym.registration import task_interface  # noqa: E402
 from foosball_gym.session_log import read_session_log  # noqa: E402
-from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config  # noqa: E402
-from foosball_gym.vision import CameraCalibration  # noqa: E402
 
 SMALL_CAMERA = (320, 180)
 
@@ -77,7 +77,7 @@ def test_cli_plays_on_the_simulated_table(capsys):
 
 
 def test_the_cli_plays_the_simulated_table_in_real_time_by_default(monkeypatch, capsys):
-    from foosball_gym.play import stack
+    from foosball_gym.real_table.play import stack
 
     chosen: dict = {}
     real_play_sim = stack.play_sim
@@ -96,7 +96,7 @@ def test_the_cli_plays_the_simulated_table_in_real_time_by_default(monkeypatch, 
 
 
 def test_play_takes_its_latency_in_milliseconds(monkeypatch, capsys):
-    from foosball_gym.play import stack
+    from foosball_gym.real_table.play import stack
 
     chosen: dict = {}
 
@@ -122,7 +122,7 @@ def test_a_step_the_table_takes_while_the_loop_decides_makes_that_loop_late(monk
     """The table counts the steps it took with no loop waiting (see the real-time table's
     own test); each is charged to the loop that was deciding then. Here a lock-step table
     is told of such a step from inside every other decision, so the count is exact."""
-    from foosball_gym.virtual_table import simulated_table
+    from foosball_gym.real_table.virtual import simulated_table
 
     tables = []
     real_init = simulated_table.SimulatedTable.__init__
@@ -161,9 +161,9 @@ def test_drives_answering_late_on_a_busy_machine_stop_only_a_real_time_table(
     control period on a real table (and on one simulated in real time)."""
     import threading
 
-    from foosball_gym.hardware.safety import SafetyError
-    from foosball_gym.play import stack
-    from foosball_gym.virtual_table.drive import SimulatedDrive
+    from foosball_gym.real_table.hardware.safety import SafetyError
+    from foosball_gym.real_table.play import stack
+    from foosball_gym.real_table.virtual.drive import SimulatedDrive
 
     real_send = SimulatedDrive.send_tpdos
     monkeypatch.setattr(
@@ -363,7 +363,7 @@ def test_calibrate_refuses_a_picture_over_its_pixel_budget_before_decoding_it(
 
 @pytest.mark.parametrize("suffix", [".png", ".jpg", ".bmp"])
 def test_a_pictures_size_is_read_from_its_header(tmp_path, suffix):
-    from foosball_gym.vision.calibration import image_size
+    from foosball_gym.real_table.vision.calibration import image_size
 
     image = tmp_path / f"picture{suffix}"
     cv2.imwrite(str(image), np.zeros((45, 123, 3), np.uint8))
@@ -388,7 +388,7 @@ def _bad_table_file(tmp_path):
 def _table_whose_bus_does_not_open(tmp_path, interface="socketcan", channel="nocan9"):
     """A calibrated table file whose camera opens (a video file) and whose CAN bus does not."""
     from foosball_gym.camera import CameraModel
-    from foosball_gym.hardware.config import BusConfig
+    from foosball_gym.real_table.hardware.config import BusConfig
 
     video = str(tmp_path / "camera.avi")
     writer = cv2.VideoWriter(video, cv2.VideoWriter_fourcc(*"MJPG"), 30, (160, 90))
@@ -592,7 +592,7 @@ def test_a_paced_lock_step_table_never_runs_ahead_of_the_wall_clock():
 
 
 def test_a_frame_that_comes_too_late_is_named_and_not_waited_for():
-    from foosball_gym.virtual_table.camera_process import CameraProcess
+    from foosball_gym.real_table.virtual.camera_process import CameraProcess
 
     sim = SimulatedTable(
         "Foosball-Block-v0", {}, virtual_table_config(task_interface("Foosball-Block-v0"))

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from foosball_gym import table
-from foosball_gym.hardware.config import simulated_joint
-from foosball_gym.hardware.safety import JointLimits, TargetLimiter
+from foosball_gym.real_table.hardware.config import simulated_joint
+from foosball_gym.real_table.hardware.safety import JointLimits, TargetLimiter
 from foosball_gym.registration import task_interface
 
 STILL_BALL = {"ball_position": (0.3, 0.3), "ball_velocity": (0.0, 0.0)}
@@ -46,7 +46,7 @@ def test_on_by_default_with_estimated_state_and_off_on_the_true_state(make_env):
 @pytest.mark.parametrize("env_id", ["Foosball-Block-v0", "Foosball-Score-v0"])
 def test_the_drives_get_what_the_play_stacks_limiter_sends(make_env, env_id):
     """The very targets ``TableDrives.command`` sends a simulated table, step by step."""
-    from foosball_gym.virtual_table.simulated_table import virtual_table_config
+    from foosball_gym.real_table.virtual.simulated_table import virtual_table_config
 
     env = make_env(env_id, safety_layer=True)
     env.reset(seed=0, options=STILL_BALL)
@@ -140,7 +140,7 @@ def test_rewards_see_the_policys_own_action(make_env):
 def test_the_simulated_table_serves_the_balls_of_the_seeded_episodes(make_env, env_id, kwargs):
     """``foosball play --seed S`` serves episode S + K's ball as its serve K, with the same
     drawn physics: play and eval meet the same shots."""
-    from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
+    from foosball_gym.real_table.virtual.simulated_table import SimulatedTable, virtual_table_config
 
     config = virtual_table_config(task_interface(env_id, kwargs))
     sim_table = SimulatedTable(env_id, kwargs, config, seed=7, camera_size=(64, 36))
@@ -166,8 +166,8 @@ def test_play_brings_the_rods_to_each_episodes_start_before_its_ball(
     another ball (33 of 60 serves from rest). Play now brings the rods to where the episode
     starts them, at rest, and serves that episode's ball: the one eval plays."""
     from foosball_gym import load_policy
-    from foosball_gym.play.stack import play_sim
-    from foosball_gym.virtual_table import simulated_table
+    from foosball_gym.real_table.play.stack import play_sim
+    from foosball_gym.real_table.virtual import simulated_table
 
     served = []
     real_serve = simulated_table.SimulatedTable.serve
@@ -196,7 +196,7 @@ def test_play_brings_the_rods_to_each_episodes_start_before_its_ball(
 
 
 def sim_table(env_id: str = "Foosball-KeeperVsKeeper-v0", **kwargs):
-    from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
+    from foosball_gym.real_table.virtual.simulated_table import SimulatedTable, virtual_table_config
 
     config = virtual_table_config(task_interface(env_id, kwargs))
     return SimulatedTable(env_id, kwargs, config, seed=3, camera_size=(320, 180))
@@ -234,7 +234,7 @@ def test_a_camera_without_errors_pictures_the_table_as_it_is():
 
 
 def test_a_missed_frame_shows_no_ball_to_the_detector():
-    from foosball_gym.vision import ColourBallDetector
+    from foosball_gym.real_table.vision import ColourBallDetector
 
     t = sim_table("Foosball-Block-v0", estimated_state=True, camera_noise={"drop_rate": 0.999})
     try:

@@ -87,7 +87,7 @@ def test_the_drive_limits_a_rod_meets_at_the_ball_are_the_drawn_ones(make_env):
 
 
 def test_the_simulated_table_draws_the_drive_limits_too():
-    from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
+    from foosball_gym.real_table.virtual.simulated_table import SimulatedTable, virtual_table_config
 
     config = virtual_table_config(task_interface("Foosball-Block-v0"))
     t = SimulatedTable("Foosball-Block-v0", {"drive_speed_range": (0.5, 0.5)}, config)

@@ -108,7 +108,7 @@ def session_log(tmp_path_factory) -> tuple[Path, object]:
     pytest.importorskip("canopen")
     import gymnasium as gym
 
-    from foosball_gym.play.stack import play_sim
+    from foosball_gym.real_table.play.stack import play_sim
 
     env = gym.make("Foosball-Block-v0")
     keeper = env.unwrapped.scripted_policy()

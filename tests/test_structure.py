@@ -111,8 +111,10 @@ def test_the_interface_is_the_environments_own():
 def test_hardware_vision_estimation_and_the_play_loop_do_not_import_the_simulator():
     code = (
         "import sys;"
-        "import foosball_gym.hardware.drives, foosball_gym.vision, foosball_gym.estimation;"
-        "import foosball_gym.play.loop, foosball_gym.play.session, foosball_gym.play.stack;"
+        "import foosball_gym.real_table.hardware.drives, foosball_gym.real_table.vision;"
+        "import foosball_gym.estimation;"
+        "import foosball_gym.real_table.play.loop, foosball_gym.real_table.play.session;"
+        "import foosball_gym.real_table.play.stack;"
         "bad = [m for m in ('pybullet', 'foosball_gym.sim') if m in sys.modules];"
         "assert not bad, bad"
     )
@@ -121,7 +123,7 @@ def test_hardware_vision_estimation_and_the_play_loop_do_not_import_the_simulato
 
 
 def test_only_the_simulated_table_reaches_the_simulator_from_the_hardware_side():
-    hardware_side = ("hardware", "vision", "estimation", "play")
+    hardware_side = ("real_table/hardware", "real_table/vision", "estimation", "real_table/play")
     for folder in hardware_side:
         for path in (PACKAGE / folder).rglob("*.py"):
             source = path.read_text().replace("``foosball_gym.sim``", "")
@@ -217,13 +219,15 @@ def test_no_module_imports_itself_back_through_others():
 
 
 # Layers, lowest first: a module may import its own layer and those below, never one above.
-# The real table (policy_io, estimation, vision, hardware, play) never reaches the simulator
-# or the environments, whatever the training side does.
+# The real-table wing (real_table/: hardware, vision, play, virtual, sysid) stands on the ground
+# floor beside the simulator; nothing outside it but the CLI imports it (see
+# test_nothing_outside_the_real_table_wing_imports_it). Inside it, the drives and the camera
+# (and the state estimator they share with the environments, with policy_io) never reach the
+# simulator or the environments, whatever the training side does.
 BELOW = {
     "foosball_gym.policy_io": {
         "foosball_gym.envs",
         "foosball_gym.sim",
-        "foosball_gym.virtual_table",
         "foosball_gym.tasks",
         "foosball_gym.game",
     },
@@ -231,36 +235,41 @@ BELOW = {
     "foosball_gym.tasks": {
         "foosball_gym.envs",
         "foosball_gym.sim",
-        "foosball_gym.virtual_table",
         "foosball_gym.game",
         "foosball_gym.training",
     },
     "foosball_gym.game": {
         "foosball_gym.envs",
-        "foosball_gym.virtual_table",
         "foosball_gym.training",
     },
     # The simulated table plays the game itself; it never builds an environment.
-    "foosball_gym.virtual_table": {"foosball_gym.envs", "foosball_gym.training"},
+    "foosball_gym.real_table.virtual": {"foosball_gym.envs", "foosball_gym.training"},
     "foosball_gym.estimation": {
         "foosball_gym.envs",
         "foosball_gym.sim",
         "foosball_gym.training",
-        "foosball_gym.virtual_table",
     },
-    "foosball_gym.vision": {
+    # The camera and the drives are the wing's floor: neither knows the other, the loop that
+    # drives them, the simulated table or system identification.
+    "foosball_gym.real_table.vision": {
         "foosball_gym.envs",
         "foosball_gym.sim",
         "foosball_gym.training",
-        "foosball_gym.virtual_table",
+        "foosball_gym.real_table.hardware",
+        "foosball_gym.real_table.play",
+        "foosball_gym.real_table.virtual",
+        "foosball_gym.real_table.sysid",
     },
-    "foosball_gym.hardware": {
+    "foosball_gym.real_table.hardware": {
         "foosball_gym.envs",
         "foosball_gym.sim",
         "foosball_gym.training",
-        "foosball_gym.virtual_table",
+        "foosball_gym.real_table.vision",
+        "foosball_gym.real_table.play",
+        "foosball_gym.real_table.virtual",
+        "foosball_gym.real_table.sysid",
     },
-    "foosball_gym.play": {
+    "foosball_gym.real_table.play": {
         "foosball_gym.envs",
         "foosball_gym.sim",
         "foosball_gym.game",
@@ -269,18 +278,21 @@ BELOW = {
     # One module owns the play-log format; its readers (replay pages, system identification)
     # read it there, not from the stack that writes it.
     "foosball_gym.session_log": {
-        "foosball_gym.play",
         "foosball_gym.sim",
         "foosball_gym.envs",
         "foosball_gym.training",
     },
     "foosball_gym.replay": {
-        "foosball_gym.play",
-        "foosball_gym.sysid",
         "foosball_gym.sim",
         "foosball_gym.training",
     },
-    "foosball_gym.sysid": {"foosball_gym.play", "foosball_gym.replay"},
+    # System identification reads logs; it neither plays (the loop, the simulated table, whose
+    # calibration serves it gives) nor shows them.
+    "foosball_gym.real_table.sysid": {
+        "foosball_gym.real_table.play",
+        "foosball_gym.real_table.virtual",
+        "foosball_gym.replay",
+    },
     "foosball_gym.policies": {
         "foosball_gym.envs",
         "foosball_gym.sim",
@@ -325,6 +337,26 @@ def test_no_module_imports_a_layer_above_its_own():
         if module == package or module.startswith(package + ".")
         for target in targets
         if any(target == a or target.startswith(a + ".") for a in above)
+    ]
+    assert wrong == []
+
+
+def test_nothing_outside_the_real_table_wing_imports_it():
+    graph = import_graph(module_files(SOURCES))
+    # The check sees the wing's own arrows and the CLI's into it.
+    assert "foosball_gym.real_table.hardware.config" in graph["foosball_gym.real_table.play.stack"]
+    assert "foosball_gym.real_table.play.stack" in graph["foosball_gym.cli.play"]
+
+    def inside(module: str, package: str) -> bool:
+        return module == package or module.startswith(package + ".")
+
+    wing = "foosball_gym.real_table"
+    wrong = [
+        f"{module} imports {target}"
+        for module, targets in graph.items()
+        if not inside(module, wing) and not inside(module, "foosball_gym.cli")
+        for target in targets
+        if inside(target, wing)
     ]
     assert wrong == []
 
@@ -493,7 +525,7 @@ ENV_ROOTS = (
     "foosball_gym.registration",
     "foosball_gym.envs",
     "foosball_gym.estimation",
-    "foosball_gym.vision",
+    "foosball_gym.real_table.vision",
     "foosball_gym.tasks",
     "foosball_gym.game",
     "foosball_gym.policy_io",
@@ -505,9 +537,9 @@ ENV_ROOTS = (
 OWN_EXTRAS = (
     "foosball_gym.training",
     "foosball_gym.multiagent",
-    "foosball_gym.hardware",
-    "foosball_gym.play",
-    "foosball_gym.virtual_table",
+    "foosball_gym.real_table.hardware",
+    "foosball_gym.real_table.play",
+    "foosball_gym.real_table.virtual",
 )
 # The import names of each distribution whose own name (lower case, - as _) is not one.
 IMPORT_NAMES = {
@@ -584,3 +616,49 @@ def test_the_extra_check_finds_a_package_the_train_extra_lacks(tmp_path):
     setup_cfg = tmp_path / "setup.cfg"
     setup_cfg.write_text("\n".join(line for line in text.splitlines() if "filterpy" not in line))
     assert undeclared_imports(setup_cfg) == {"foosball_gym.estimation.kalman": {"filterpy"}}
+
+
+# The packages that moved into real_table/, by their old names: foosball_gym.old_paths keeps
+# those names importing for users, with a warning; the project itself no longer uses them.
+OLD_PATH = re.compile(
+    r"foosball_gym[./](hardware|vision|play|sysid|virtual_table)\b"
+    r"|from foosball_gym import [\w, ()]*\b(hardware|vision|play|sysid|virtual_table)\b"
+)
+# What the project is made of (text files only), and the two files that name the old paths on
+# purpose: the finder that maps them, and the test that they still import.
+PROJECT = ("foosball_gym", "cli", "urdf", "tests", "benchmarks", "scripts", "docs", ".ci")
+TOP_FILES = ("README.md", "mkdocs.yml", "setup.cfg", "tox.ini", "pyproject.toml", "ruff.toml")
+TEXT = {".py", ".md", ".yml", ".yaml", ".cfg", ".ini", ".toml", ".ipynb", ".txt", ".sh", ""}
+NAMING_THEM = {"foosball_gym/old_paths.py", "tests/test_old_paths.py"}
+
+
+def old_path_uses(root: Path) -> list[str]:
+    """Each ``file:line`` under ``root`` that names a moved package by its old path."""
+    files = [root / name for name in TOP_FILES if (root / name).exists()]
+    for folder in PROJECT:
+        files += [p for p in (root / folder).rglob("*") if p.is_file() and p.suffix in TEXT]
+    found = []
+    for path in files:
+        relative = path.relative_to(root).as_posix()
+        if relative in NAMING_THEM or "__pycache__" in path.parts:
+            continue
+        for number, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+            if OLD_PATH.search(line):
+                found.append(f"{relative}:{number}")
+    return found
+
+
+def test_nothing_in_the_project_uses_an_old_path():
+    assert old_path_uses(PACKAGE.parent) == []
+
+
+def test_the_old_path_check_finds_an_old_path(tmp_path):
+    package = "foosball_gym"  # written apart, so this file does not name an old path itself
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "page.md").write_text(f"::: {package}.real_table.vision\n")
+    (tmp_path / "cli").mkdir()
+    (tmp_path / "cli" / "play.py").write_text(
+        f"import {package}.real_table.play\nfrom {package} import table, vision\n"
+    )
+    (tmp_path / "mkdocs.yml").write_text(f"- {package}/virtual_table/drive.py\n")
+    assert old_path_uses(tmp_path) == ["mkdocs.yml:1", "cli/play.py:2"]

@@ -21,15 +21,15 @@ from play_logs import header, record  # noqa: E402
 
 from foosball_gym import table  # noqa: E402
 from foosball_gym.cli import main  # noqa: E402
-from foosball_gym.sysid import read_logs  # noqa: E402
-from foosball_gym.sysid.excitation import (  # noqa: E402
+from foosball_gym.real_table.sysid import read_logs  # noqa: E402
+from foosball_gym.real_table.sysid.excitation import (  # noqa: E402
     CALIBRATION_SPEEDS,
     ROD_CLEARANCE,
     calibration_serve,
     free_bands,
 )
-from foosball_gym.sysid.latency import camera_latency  # noqa: E402
-from foosball_gym.sysid.segments import ball_segments  # noqa: E402
+from foosball_gym.real_table.sysid.latency import camera_latency  # noqa: E402
+from foosball_gym.real_table.sysid.segments import ball_segments  # noqa: E402
 
 ENV_ID = "Foosball-Block-v0"
 SMALL_CAMERA = (320, 180)
@@ -193,8 +193,9 @@ def test_sysid_shows_the_fit_going_on_stderr_and_keeps_its_report_on_stdout(good
 def test_log_reading_segments_and_camera_latency_need_no_simulator():
     code = (
         "import sys;"
-        "import foosball_gym.sysid.logs, foosball_gym.sysid.segments, foosball_gym.sysid.latency;"
-        "import foosball_gym.sysid.excitation, foosball_gym.sysid.result;"
+        "import foosball_gym.real_table.sysid.logs, foosball_gym.real_table.sysid.segments;"
+        "import foosball_gym.real_table.sysid.latency, foosball_gym.real_table.sysid.excitation;"
+        "import foosball_gym.real_table.sysid.result;"
         "bad = [m for m in ('pybullet', 'foosball_gym.sim') if m in sys.modules];"
         "assert not bad, bad"
     )
@@ -220,7 +221,7 @@ def test_a_track_is_cut_at_its_wall_bounce_into_two_linked_stretches(tmp_path):
 
 
 def test_a_budget_draws_whole_stretches_evenly_and_keeps_each_ones_bounce():
-    from foosball_gym.sysid.segments import BallSegment, within_budget
+    from foosball_gym.real_table.sysid.segments import BallSegment, within_budget
 
     def stretch(follows=None, wall=None):
         times = np.arange(61) / 60  # a second each
@@ -275,7 +276,7 @@ def test_calibration_balls_start_clear_of_every_rod_and_run_across_or_along_the_
 
 
 def fitted(values, task_options=None, not_determined=None):
-    from foosball_gym.sysid.result import SysidResult
+    from foosball_gym.real_table.sysid.result import SysidResult
 
     return SysidResult(
         values=values,
@@ -378,8 +379,8 @@ def test_the_ball_replay_rolls_a_ball_as_the_simulator_does():
 
 
 def simulated_table(env_kwargs, **kwargs):
+    from foosball_gym.real_table.virtual.simulated_table import SimulatedTable, virtual_table_config
     from foosball_gym.registration import task_interface
-    from foosball_gym.virtual_table.simulated_table import SimulatedTable, virtual_table_config
 
     config = virtual_table_config(task_interface(ENV_ID, env_kwargs))
     return SimulatedTable(ENV_ID, env_kwargs, config, camera_size=SMALL_CAMERA, **kwargs)
@@ -425,7 +426,7 @@ def test_the_simulated_table_serves_calibration_balls_for_four_seconds():
 
 
 def test_calibration_serves_are_refused_on_a_real_table(capsys):
-    from foosball_gym.hardware.config import shipped_table
+    from foosball_gym.real_table.hardware.config import shipped_table
 
     argv = ["play", "scripted", "--env", ENV_ID, "--table", str(shipped_table("keeper"))]
     with pytest.raises(SystemExit) as exit_info:
@@ -444,10 +445,10 @@ def record_calibration(
     at most ``seconds`` of play, and most of that; by a camera that pictures the ball exactly
     unless ``camera_errors``. A session that its own drive supervision
     stops on a busy machine is kept, and another one logged after it."""
-    from foosball_gym.hardware.safety import SafetyError
-    from foosball_gym.play.stack import play_sim
+    from foosball_gym.real_table.hardware.safety import SafetyError
+    from foosball_gym.real_table.play.stack import play_sim
+    from foosball_gym.real_table.sysid.excitation import CALIBRATION_SERVE_S
     from foosball_gym.registration import scripted_policy
-    from foosball_gym.sysid.excitation import CALIBRATION_SERVE_S
 
     folder.mkdir(parents=True, exist_ok=True)
     policy = scripted_policy(ENV_ID, env_kwargs, on_table=True)
@@ -498,7 +499,7 @@ def assert_recovered(result, truth, tolerance=0.10, tolerances=None):
 
 
 def test_a_short_calibration_log_gives_an_altered_tables_physics_back(small_logs):
-    from foosball_gym.sysid.fit import fit_logs
+    from foosball_gym.real_table.sysid.fit import fit_logs
 
     result = fit_logs(small_logs["altered"])
     assert_recovered(result, ALTERED_TRUTH)
@@ -513,7 +514,7 @@ def test_a_short_calibration_log_gives_an_altered_tables_physics_back(small_logs
 
 
 def test_a_short_calibration_log_gives_the_default_tables_physics_back(small_logs):
-    from foosball_gym.sysid.fit import fit_logs
+    from foosball_gym.real_table.sysid.fit import fit_logs
 
     result = fit_logs(small_logs["default"])
     # Half a minute holds few of the ball's sliding contacts, and which ones hangs on how the
@@ -558,7 +559,7 @@ def test_sysid_writes_its_json_a_training_config_and_a_plot(small_logs, tmp_path
 @pytest.mark.slow
 def test_five_minutes_of_calibration_play_give_both_tables_physics_back(tmp_path):
     """The issue's case in full: at most 5 minutes of play on each table, the default camera."""
-    from foosball_gym.sysid.fit import fit_logs
+    from foosball_gym.real_table.sysid.fit import fit_logs
 
     for name, env_kwargs, truth in (
         ("altered", ALTERED, ALTERED_TRUTH),

@@ -29,27 +29,27 @@ import pytest
 
 pytest.importorskip("canopen")
 
-from foosball_gym.hardware import (  # noqa: E402
+from foosball_gym.real_table.hardware import (  # noqa: E402
     BusConfig,
     JointConfig,
     SafetyError,
     TableConfig,
     WatchdogTripped,
 )
-from foosball_gym.hardware.cia402.protocol import (  # noqa: E402
+from foosball_gym.real_table.hardware.cia402.protocol import (  # noqa: E402
     CONSUMER_HEARTBEAT_TIME,
     CONTROLWORD,
     CW_QUICK_STOP,
 )
-from foosball_gym.hardware.drives import DEFAULT_MASTER_NODE_ID, TableDrives  # noqa: E402
-from foosball_gym.play.stack import play_real, play_sim  # noqa: E402
-from foosball_gym.play.termination import Terminated, stop_on_termination  # noqa: E402
-from foosball_gym.registration import task_interface  # noqa: E402
-from foosball_gym.sim import TableSim  # noqa: E402
-from foosball_gym.virtual_table import (
+from foosball_gym.real_table.hardware.drives import DEFAULT_MASTER_NODE_ID, TableDrives  # noqa: E402
+from foosball_gym.real_table.play.stack import play_real, play_sim  # noqa: E402
+from foosball_gym.real_table.play.termination import Terminated, stop_on_termination  # noqa: E402
+from foosball_gym.real_table.virtual import (
     SimulatedDrives,  # noqa: E402
     simulated_table,  # noqa: E402
 )
+from foosball_gym.registration import task_interface  # noqa: E402
+from foosball_gym.sim import TableSim  # noqa: E402
 
 SLIDE = ("home_keeper", "slide")
 SPIN = ("home_keeper", "spin")
@@ -272,8 +272,8 @@ def test_play_real_stops_a_table_whose_camera_gives_the_same_frame_again(
     """``play_real`` with a camera whose ``read()`` returns its last frame again: the loop
     commands on, but the state watchdog stops the table, which brakes and switches off."""
     from foosball_gym.camera import CameraModel
-    from foosball_gym.play import stack
-    from foosball_gym.vision import CameraCalibration
+    from foosball_gym.real_table.play import stack
+    from foosball_gym.real_table.vision import CameraCalibration
 
     config = keeper_config()
     # The simulated drives answer a SYNC at their table's next step, up to 1/60 s later: a
@@ -322,7 +322,7 @@ def test_a_camera_that_gives_its_last_picture_under_new_time_stamps_stops_the_ta
     picture. Without a frame counter the loop sees the pixels unchanged; with one, the number
     standing still. The table stops within ``watchdog_s`` and one control period of the last
     new picture (on the simulated clock), then brakes and switches off."""
-    from foosball_gym.play import stack
+    from foosball_gym.real_table.play import stack
 
     pictures: list[float] = []
 
@@ -380,8 +380,8 @@ def test_a_video_file_of_a_still_scene_is_no_frozen_camera(tmp_path):
     are ten new pictures for the watchdog, where a camera's ten alike would be one."""
     import cv2
 
-    from foosball_gym.play.loop import PlayLoop
-    from foosball_gym.vision import OpenCVSource
+    from foosball_gym.real_table.play.loop import PlayLoop
+    from foosball_gym.real_table.vision import OpenCVSource
 
     path = str(tmp_path / "still.avi")
     writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), 60, (160, 90))
@@ -415,8 +415,8 @@ def test_play_real_stops_a_table_whose_camera_gives_its_last_picture_under_new_t
     with the time it is read (as ``OpenCVSource`` stamps a camera's frames): the loop commands
     on, but the state watchdog stops the table, which brakes and switches off."""
     from foosball_gym.camera import CameraModel
-    from foosball_gym.play import stack
-    from foosball_gym.vision import CameraCalibration
+    from foosball_gym.real_table.play import stack
+    from foosball_gym.real_table.vision import CameraCalibration
 
     config = keeper_config()
     config.control_hz = 40.0  # as in the test above: room for the drives' answer
@@ -557,9 +557,9 @@ MASTER = textwrap.dedent(
     """
     import sys, time
     import canopen
-    from foosball_gym.hardware import BusConfig, JointConfig, TableConfig
-    from foosball_gym.hardware.drives import TableDrives
-    from foosball_gym.play.termination import Terminated, catch_termination
+    from foosball_gym.real_table.hardware import BusConfig, JointConfig, TableConfig
+    from foosball_gym.real_table.hardware.drives import TableDrives
+    from foosball_gym.real_table.play.termination import Terminated, catch_termination
 
     group, port = sys.argv[1], int(sys.argv[2])
     config = TableConfig(
@@ -814,7 +814,7 @@ class FakeFrame:
 def test_a_sigterm_landing_in_threading_code_is_taken_up_once_the_thread_is_out_of_it():
     import threading
 
-    from foosball_gym.play.termination import catch_termination
+    from foosball_gym.real_table.play.termination import catch_termination
 
     restore = catch_termination()
     try:
@@ -836,7 +836,7 @@ def test_a_sigterm_landing_in_threading_code_is_taken_up_once_the_thread_is_out_
 def test_a_sigterm_is_held_out_of_threading_code_only_so_long(monkeypatch):
     import threading
 
-    from foosball_gym.play import termination
+    from foosball_gym.real_table.play import termination
 
     monkeypatch.setattr(termination, "HOLD_LIMIT_S", 0.0)
     restore = termination.catch_termination()

@@ -7,9 +7,7 @@ import numpy as np
 import pytest
 
 from foosball_gym.camera import CameraModel
-from foosball_gym.sim import TableSim
-from foosball_gym.table import BALL_RADIUS, RODS, rod
-from foosball_gym.vision import (
+from foosball_gym.real_table.vision import (
     FIELD_MARKERS,
     CallableSource,
     CameraCalibration,
@@ -23,6 +21,8 @@ from foosball_gym.vision import (
     find_field_corners,
     fit_slide,
 )
+from foosball_gym.sim import TableSim
+from foosball_gym.table import BALL_RADIUS, RODS, rod
 
 W, H = 640, 360
 OPPONENT = ["away_keeper", "away_defense", "away_offense"]

@@ -1,9 +1,10 @@
 """How the safety layer lets a joint's targets move: inside its limits, no faster than its
 drive.
 
-The real table's safety layer (:mod:`foosball_gym.hardware.safety`) sends every target through
-a :class:`TargetLimiter`; the environments' ``safety_layer`` option sends their actions through
-the same one (:mod:`foosball_gym.envs.safety_layer`), so here, where both sides may reach it.
+The real table's safety layer (:mod:`foosball_gym.real_table.hardware.safety`) sends every target
+through a :class:`TargetLimiter`; the environments' ``safety_layer`` option sends their actions
+through the same one (:mod:`foosball_gym.envs.safety_layer`), so here, where both sides may reach
+it.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ class JointLimits:
     @classmethod
     def of(cls, joint: Any) -> JointLimits:
         """The limits of a configured joint (a
-        :class:`~foosball_gym.hardware.config.JointConfig`): the table's limit minus the
+        :class:`~foosball_gym.real_table.hardware.config.JointConfig`): the table's limit minus the
         joint's margin."""
         # JointConfig fills in the defaults of those left None.
         assert joint.limit_margin is not None and joint.max_speed is not None

@@ -1,5 +1,5 @@
 """Replaying what a table logged, under physical parameters of one's choosing: the simulator's
-side of system identification (:mod:`foosball_gym.sysid`).
+side of system identification (:mod:`foosball_gym.real_table.sysid`).
 
 - :class:`BallReplay` rolls a ball on the bare table (no rods: the segments replayed are those
   where no figurine could reach the ball) from a state, and says where it is at given times.

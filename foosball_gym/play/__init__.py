@@ -1,5 +1,0 @@
-"""Running a policy on a table: the control loop, session logs, and the stack around them.
-
-Needs the hardware extra (``pip install -e ".[hardware]"``); never the simulator,
-except through :mod:`foosball_gym.virtual_table` for ``--table sim``.
-"""
