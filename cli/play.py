@@ -4,25 +4,26 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .common import (
     CliError,
     LibraryDefault,
     _has_display,
     add_env_arguments,
-    check_model_fits,
     given,
     is_scripted,
     load_model,
     parse_env_kwargs,
     positive_int,
     positive_number,
-    scripted,
     seed,
     show_size,
     size,
 )
+
+if TYPE_CHECKING:
+    from foosball_gym.envs.options import CheckedOptions
 
 PLAY_SIM = "foosball_gym.real_table.play.stack:play_sim"
 # A camera's frame takes a few milliseconds to be read out at the least, and one that comes
@@ -183,54 +184,51 @@ def latency_ms(text: str) -> float:
     return value / 1e3
 
 
-def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
-    """The policy to play, with the environment it was trained on, whose options are checked
-    as the environment checks them."""
-    policy, env_id, env_kwargs = _chosen_policy(args)
-    from foosball_gym.registration import check_env_options
+def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any], CheckedOptions]:
+    """The policy to play, with the environment it was trained on and its options, checked
+    as the environment checks them: resolved once, here, for the whole command."""
+    from foosball_gym.policies.ladder import parse_scripted
+    from foosball_gym.registration import check_env_options, scripted_for
 
-    try:
-        check_env_options(env_id, env_kwargs)
-    except (ValueError, TypeError) as err:
-        raise CliError(str(err)) from None
-    return policy, env_id, env_kwargs
-
-
-def _chosen_policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any]]:
     env_kwargs = parse_env_kwargs(args.env_kwarg)
+    loaded = None
     if is_scripted(args.model):
         if not args.env:
             raise CliError("the scripted policy needs --env ENV_ID")
-        # A table, simulated or real, is seen through a camera and a filter.
-        policy = scripted(args.env, env_kwargs, on_table=True, spec=args.model)
-        return policy, args.env, env_kwargs
-    loaded = load_model(args.model, args.trust_model)
-    if loaded.recurrent:
-        # A table has no episodes to start its memory afresh at, as training had.
-        raise CliError(
-            f"{args.model} is a recurrent policy (RecurrentPPO), which foosball play does not "
-            "run: its memory would span balls where training reset it; rate it with foosball eval"
-        )
-    env_id = args.env or loaded.env_id
-    if env_id is None:
-        raise CliError(f"{args.model} does not say its environment; give --env ENV_ID")
-    env_kwargs = {**loaded.env_kwargs, **env_kwargs}
-    check_model_fits(loaded, env_id, env_kwargs)
+        env_id = args.env
+    else:
+        loaded = load_model(args.model, args.trust_model)
+        if loaded.recurrent:
+            # A table has no episodes to start its memory afresh at, as training had.
+            raise CliError(
+                f"{args.model} is a recurrent policy (RecurrentPPO), which foosball play does "
+                "not run: its memory would span balls where training reset it; rate it with "
+                "foosball eval"
+            )
+        env_id = args.env or loaded.env_id
+        if env_id is None:
+            raise CliError(f"{args.model} does not say its environment; give --env ENV_ID")
+        env_kwargs = {**loaded.env_kwargs, **env_kwargs}
     try:
-        # A residual plays over the scripted baseline for a table's camera and filter.
-        loaded = loaded.with_baseline_for(env_id, env_kwargs, on_table=True)
+        checked = check_env_options(env_id, env_kwargs)
+        if loaded is None:
+            # A table, simulated or real, is seen through a camera and a filter.
+            policy = scripted_for(checked, on_table=True, level=parse_scripted(args.model))
+        else:
+            loaded.check_env(env_id, env_kwargs, checked)
+            # A residual plays over the scripted baseline for a table's camera and filter.
+            policy = loaded.with_baseline_of(checked, on_table=True)
     except (ValueError, TypeError) as err:
         raise CliError(str(err)) from None
-    return loaded, env_id, env_kwargs
+    return policy, env_id, env_kwargs, checked
 
 
-def _check_human(env_id: str, env_kwargs: dict[str, Any], human: str, rod: str | None) -> None:
+def _check_human(env_id: str, checked: CheckedOptions, human: str, rod: str | None) -> None:
     """Fail where a person cannot play ``human`` in the environment."""
     from foosball_gym.real_table.play.human import human_rod
-    from foosball_gym.registration import task_interface
 
     try:
-        human_rod(env_id, task_interface(env_id, env_kwargs).layout, human)
+        human_rod(env_id, checked.interface.layout, human)
     except ValueError as err:
         raise CliError(f"{'--human-rod ' + rod if rod else '--human'}: {err}") from None
 
@@ -244,7 +242,6 @@ def run(args: argparse.Namespace) -> int:
     from foosball_gym.real_table.hardware.config import ConfigError, load_config
     from foosball_gym.real_table.hardware.safety import SafetyError
     from foosball_gym.real_table.virtual.viewer_process import WindowError
-    from foosball_gym.registration import task_interface
 
     human = args.human_rod or ("keeper" if args.human else None)
     gui = args.gui or human is not None
@@ -253,9 +250,9 @@ def run(args: argparse.Namespace) -> int:
     view = args.view or "top"
     if gui and args.table != "sim":
         raise CliError("--gui and --human play on the simulated table: give --table sim")
-    policy, env_id, env_kwargs = _policy(args)
+    policy, env_id, env_kwargs, checked = _policy(args)
     if human is not None:
-        _check_human(env_id, env_kwargs, human, args.human_rod)
+        _check_human(env_id, checked, human, args.human_rod)
     if gui and not _has_display():
         option = "--human" if human is not None else "--gui"
         raise CliError(
@@ -300,13 +297,14 @@ def run(args: argparse.Namespace) -> int:
                 pace=gui and not realtime,
                 view=view,
                 serves=args.serves,
+                checked=checked,
                 **given(args, "seed", "camera_size"),
             )
         else:
             config = load_config(args.table)
             report = play_real(
                 policy,
-                task_interface(env_id, env_kwargs),
+                checked.interface,
                 config,
                 duration_s=args.duration,
                 log_path=args.log,

@@ -201,6 +201,18 @@ def scripted_policy(
     return task.scripted_level(level, names, precise)
 
 
+def scripted_for(checked: CheckedOptions, on_table: bool = False, level: int | None = None) -> Any:
+    """:func:`scripted_policy` for options already checked (:func:`check_env_options`), so that
+    a caller that has them resolves nothing again.
+
+    Raises:
+        ValueError: the environment has no such level.
+    """
+    precise = not (on_table or checked.values.estimated_state)
+    names = list(checked.interface.builder.names)
+    return checked.task.scripted_level(level, names, precise)
+
+
 def describe_envs(env_id: str | None = None) -> str:
     """Every registered environment (or only ``env_id``) with its spaces, and each option with
     its default, the values it takes where they are few, and the first sentence of its

@@ -76,6 +76,30 @@ def test_cli_plays_on_the_simulated_table(capsys):
     assert "late 0 of" in out  # lock-step: the table waits for the loop
 
 
+@pytest.mark.parametrize("model", ["scripted", "builtin:block"])
+def test_play_resolves_its_task_once_and_builds_one_world(model, monkeypatch, capsys):
+    # Checked options travel as one object from the command line to the simulated table; a
+    # residual's own baseline, made when it loads, is the one other task it builds.
+    import foosball_gym.registration as registration
+    from foosball_gym.sim import table_sim
+
+    tasks, worlds = [], []
+    make_task, build = registration.make_task, table_sim.TableSim.__init__
+    monkeypatch.setattr(
+        registration, "make_task", lambda *a, **k: tasks.append(a) or make_task(*a, **k)
+    )
+    monkeypatch.setattr(
+        table_sim.TableSim,
+        "__init__",
+        lambda self, *a, **k: worlds.append(a) or build(self, *a, **k),
+    )
+    argv = ["play", model, "--env", "Foosball-Block-v0", "--table", "sim", "--episodes", "1"]
+    assert main([*argv, "--camera", "320x180", "--no-status", "--lockstep"]) == 0
+    assert len(worlds) == 1
+    assert len(tasks) == (1 if model == "scripted" else 2)
+    assert "1 episodes of Foosball-Block-v0" in capsys.readouterr().out
+
+
 def test_the_cli_plays_the_simulated_table_in_real_time_by_default(monkeypatch, capsys):
     from foosball_gym.real_table.play import stack
 

@@ -14,7 +14,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -37,6 +37,9 @@ from foosball_gym.real_table.vision import (
     calibrate_intrinsics,
 )
 from foosball_gym.table import rod
+
+if TYPE_CHECKING:
+    from foosball_gym.registration import CheckedOptions
 
 
 @dataclass
@@ -234,6 +237,7 @@ def play_sim(
     view: str = "top",
     serves: str = "task",
     camera_errors: bool = True,
+    checked: CheckedOptions | None = None,
 ) -> PlayReport:
     """Play ``episodes`` served balls on the simulated table, through the whole stack.
 
@@ -263,17 +267,22 @@ def play_sim(
     table's physics to ``foosball sysid`` (:mod:`foosball_gym.real_table.sysid.excitation`), each
     played for up to 4 s.
 
+    ``checked``: the task's options as ``check_env_options(env_id, env_kwargs)`` gives them,
+    where the caller has resolved them already (``foosball play`` does, once).
+
     Raises:
         ValueError: ``human`` names no away rod of the task (or the task has no away side).
         WindowError: the GUI window could not be opened (no display); a RuntimeError.
     """
     from foosball_gym.real_table.virtual.simulated_table import SimulatedTable, virtual_table_config
-    from foosball_gym.registration import task_interface
+    from foosball_gym.registration import check_env_options
 
+    if checked is None:
+        checked = check_env_options(env_id, env_kwargs)
     if camera_size is None:
         # A paced table renders in the loop's own time: the small frame keeps it near real time.
         camera_size = REALTIME_CAMERA if realtime or pace else LOCKSTEP_CAMERA
-    interface = task_interface(env_id, env_kwargs)
+    interface = checked.interface
     rod = None if human is None else human_rod(env_id, interface.layout, human)
     check_view(view)
     gui = gui or rod is not None
@@ -291,6 +300,7 @@ def play_sim(
         view=view,
         serves=serves,
         camera_errors=camera_errors,
+        checked=checked,
     )
     # Everything the table started (its camera, its viewer, its drives' threads) ends however
     # the session does, a log that cannot be opened included: left running, they keep the

@@ -34,7 +34,7 @@ import math
 import os
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -65,6 +65,9 @@ from foosball_gym.real_table.virtual.viewer_process import ViewerProcess
 from foosball_gym.registration import check_env_options
 from foosball_gym.sim import TableSim
 from foosball_gym.tasks.base import Start
+
+if TYPE_CHECKING:
+    from foosball_gym.registration import CheckedOptions
 
 # Calibration of the simulated drives: arbitrary but drive-like, and the revolute drive turned
 # round, so that a sign error anywhere between policy and rod shows.
@@ -139,6 +142,8 @@ class SimulatedTable:
         camera_errors: picture the ball and the opponent's rods with the errors of the task's
             camera model (``camera_noise``; see :meth:`seen_scene`), as the environment's
             simulated camera sees them; False pictures them exactly.
+        checked: ``env_id``'s options as ``check_env_options(env_id, env_kwargs)`` gives them,
+            where the caller has resolved them already.
 
     The environment's physics options apply as they do in the environment: ``rolling_resistance``
     and the simulator's rates, and the domain randomisation ranges (``ball_friction_range``,
@@ -162,9 +167,12 @@ class SimulatedTable:
         view: str = "top",
         serves: str = "task",
         camera_errors: bool = True,
+        checked: CheckedOptions | None = None,
     ) -> None:
-        # Checked as the environment checks them, before anything is built.
-        checked = check_env_options(env_id, env_kwargs)
+        # Checked as the environment checks them, before anything is built (once, by the
+        # caller, where it passes them).
+        if checked is None:
+            checked = check_env_options(env_id, env_kwargs)
         task = checked.task
         self.serves = check_serves(serves)
         self._randomisation = checked.randomisation

@@ -7,12 +7,14 @@ algorithm.
 
 from __future__ import annotations
 
+import inspect
 import warnings
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+import gymnasium as gym
 import numpy as np
 
 from foosball_gym import user_json
@@ -50,6 +52,9 @@ from foosball_gym.training.run_dir.storage import (
     read_norm,
     zip_statistics,
 )
+
+if TYPE_CHECKING:
+    from foosball_gym.registration import CheckedOptions
 
 
 class ModelLoadError(ValueError):
@@ -110,9 +115,8 @@ class LoadedPolicy:
     def with_baseline_for(
         self, env_id: str, env_kwargs: dict[str, Any] | None = None, on_table: bool = False
     ) -> LoadedPolicy:
-        """This policy with the scripted baseline of where it plays: the environment
-        ``env_id`` with options ``env_kwargs``, or a table's camera and filter
-        (``on_table``); itself if it is not a residual.
+        """This policy with the scripted baseline of where it plays: ``env_id`` with options
+        ``env_kwargs``, or a table's camera and filter (``on_table``); itself if no residual.
 
         The scripted baselines play the estimated state differently from the true state (the
         Score keeper volleys a ball it would deflect, as a deflection needs the ball's path to
@@ -124,22 +128,28 @@ class LoadedPolicy:
         """
         if self.baseline is None:
             return self
-        import inspect
-
-        import gymnasium as gym
-
-        from foosball_gym.registration import scripted_policy
+        from foosball_gym.registration import check_env_options
 
         # gymnasium.make's own keywords (max_episode_steps, ...) are not the environment's.
         own = set(inspect.signature(gym.make).parameters)
         options = {k: v for k, v in (env_kwargs or {}).items() if k not in own}
-        return replace(self, baseline=scripted_policy(env_id, options, on_table))
+        return self.with_baseline_of(check_env_options(env_id, options), on_table)
 
-    def check_env(self, env_id: str, env_kwargs: dict[str, Any] | None = None) -> None:
-        """Raise ValueError where the environment's observations do not fit the policy."""
+    def with_baseline_of(self, checked: CheckedOptions, on_table: bool = False) -> LoadedPolicy:
+        """:meth:`with_baseline_for` the options ``checked`` (check_env_options) holds."""
+        if self.baseline is None:
+            return self
+        from foosball_gym.registration import scripted_for
+
+        return replace(self, baseline=scripted_for(checked, on_table))
+
+    def check_env(
+        self, env_id: str, env_kwargs: Any = None, checked: CheckedOptions | None = None
+    ) -> None:
+        """Raise ValueError where the env's observations (``checked``'s, if given) do not fit."""
         from foosball_gym.registration import observation_size
 
-        size = observation_size(env_id, env_kwargs)
+        size = checked.observation_size if checked else observation_size(env_id, env_kwargs)
         expected = self.policy.observation_size
         if size != expected:
             trained = f" of {self.env_id}" if self.env_id else ""
