@@ -143,7 +143,7 @@ def test_the_play_command_takes_a_level():
     from foosball_gym.cli.play import _policy
 
     args = build_play_args("scripted:0")
-    policy, env_id, _ = _policy(args)
+    policy, env_id, _, _ = _policy(args)
     assert isinstance(policy, StandStill) and env_id == "Foosball-FullGame-v0"
     with pytest.raises(CliError, match="no scripted level 9"):
         _policy(build_play_args("scripted:9"))
