@@ -188,7 +188,7 @@ def test_a_residual_plays_over_the_baseline_of_the_state_it_is_given():
     assert played[0] == played[1] != played[2]
     # foosball play gives it the baseline for a table's camera and filter.
     args = build_parser().parse_args(["play", "builtin:score-incoming", "--table", "sim"])
-    played_policy, _, _, checked = _policy(args)
+    played_policy, _, _, _ = _policy(args)
     assert not played_policy.baseline.deflect
     # One that is not a residual is itself wherever it plays.
     resting = load_policy("builtin:score-resting")
