@@ -194,11 +194,7 @@ def scripted_policy(
             environment has no such level.
         TypeError: an option the environment does not take.
     """
-    check_env_id(env_id)
-    task, options = make_task(env_id, env_kwargs)
-    precise = not (on_table or options["estimated_state"])
-    names = list(interface_of(task, options).builder.names)
-    return task.scripted_level(level, names, precise)
+    return scripted_for(check_env_options(env_id, env_kwargs), on_table, level)
 
 
 def scripted_for(checked: CheckedOptions, on_table: bool = False, level: int | None = None) -> Any:

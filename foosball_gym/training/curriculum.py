@@ -16,18 +16,9 @@ from foosball_gym.tasks.serves import Shots
 
 
 def run_serves(env_id: str, env_kwargs: Mapping[str, Any], names: list[str]) -> dict[str, Any]:
-    """The serve options ``names`` as the run's environment has them: where a curriculum
-    ends.
-
-    Raises:
-        ValueError: the task serves no shots, or a name is not a serve option.
-    """
+    """The serve options ``names`` (checked: :func:`check_curriculum`) as the run's environment
+    has them: where a curriculum ends."""
     own = _shots(env_id, env_kwargs).options()
-    unknown = [name for name in names if name not in own]
-    if unknown:
-        raise ValueError(
-            f"curriculum: unknown serve option {unknown[0]!r}; allowed: {', '.join(own)}"
-        )
     return {name: own[name] for name in names}
 
 
@@ -50,16 +41,17 @@ def check_curriculum(
         )
     if not start:
         return
-    end = run_serves(env_id, env_kwargs, list(start))
+    shots = _shots(env_id, env_kwargs)
     try:
-        _shots(env_id, env_kwargs).changed(**start)
+        shots.changed(**start)
     except ValueError as e:
         raise ValueError(f"curriculum: {e}") from None
+    own = shots.options()
     for name, first in start.items():
-        if _is_pair(end[name]) != _is_pair(first):
+        if _is_pair(own[name]) != _is_pair(first):
             raise ValueError(
                 f"curriculum: {name} must be given as the run's is, "
-                f"{'a pair (low, high)' if _is_pair(end[name]) else 'a number'}, got {first!r}"
+                f"{'a pair (low, high)' if _is_pair(own[name]) else 'a number'}, got {first!r}"
             )
 
 
