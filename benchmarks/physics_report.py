@@ -1,12 +1,12 @@
 """A plain-text report of the simulated table's contacts, from the probes in
-``foosball_gym.physics_probes``: wall rebounds, tunnelling, corner kicks, rolling, volleys,
+``foosball_gym.sim.probes``: wall rebounds, tunnelling, corner kicks, rolling, volleys,
 a foot swung at the drive's top speed.
 
     python benchmarks/physics_report.py [--quick] [--contact-travel M] [--physics-hz HZ]
                                         [--json FILE]
 
 ``--contact-travel`` and ``--physics-hz`` reach ``TableSim`` only when given, so this file and
-``foosball_gym/physics_probes.py``, copied into an older checkout whose ``TableSim`` lacks them,
+``foosball_gym/sim/probes.py``, copied into an older checkout whose ``TableSim`` lacks them,
 measure that checkout too.
 """
 
@@ -19,7 +19,8 @@ import statistics
 import time
 from collections.abc import Callable
 
-from foosball_gym import physics_probes, table
+from foosball_gym import table
+from foosball_gym.sim import probes
 
 try:
     from foosball_gym.sim import TableSim
@@ -91,7 +92,7 @@ def _rebounds(sim, grid: dict) -> list[dict]:
     phases = [k / grid["phases"] for k in range(grid["phases"])]
     for speed in grid["speeds"]:
         for angle in grid["angles"]:
-            ratios = [physics_probes.wall_rebound(sim, speed, angle, p) for p in phases]
+            ratios = [probes.wall_rebound(sim, speed, angle, p) for p in phases]
             finite = [r for r in ratios if math.isfinite(r)]
             cells.append(
                 {
@@ -109,16 +110,14 @@ def _rebounds(sim, grid: dict) -> list[dict]:
 
 def _tunnelling(sim, grid: dict) -> list[dict]:
     return [
-        {"speed": speed, "target": target, **physics_probes.tunnelling(sim, speed, target)}
+        {"speed": speed, "target": target, **probes.tunnelling(sim, speed, target)}
         for speed in grid["tunnel_speeds"]
         for target in TARGETS
     ]
 
 
 def _corner_kicks(sim, grid: dict) -> dict:
-    kicks = [
-        {"offset_mm": mm, **physics_probes.corner_kick(sim, mm / 1000)} for mm in grid["offsets_mm"]
-    ]
+    kicks = [{"offset_mm": mm, **probes.corner_kick(sim, mm / 1000)} for mm in grid["offsets_mm"]]
     unfolded = [k["unfolded_y"] for k in kicks]
     known = [u for u in unfolded if u is not None]
     trend = math.copysign(1.0, known[-1] - known[0]) if len(known) > 1 else 0.0
@@ -144,7 +143,7 @@ def _corner_kicks(sim, grid: dict) -> dict:
 
 def _volleys(sim, grid: dict) -> list[dict]:
     return [
-        {"angle_deg": angle, **physics_probes.volley(sim, VOLLEY_SPEED, angle)}
+        {"angle_deg": angle, **probes.volley(sim, VOLLEY_SPEED, angle)}
         for angle in grid["volley_angles"]
     ]
 
@@ -156,10 +155,10 @@ def measure(grid: dict, sim_kwargs: dict) -> dict:
         "wall_rebound": lambda sim: _rebounds(sim, grid),
         "tunnelling": lambda sim: _tunnelling(sim, grid),
         "corner_kick": lambda sim: _corner_kicks(sim, grid),
-        "rolling_distance": lambda sim: physics_probes.rolling_distance(sim, 1.0),
+        "rolling_distance": lambda sim: probes.rolling_distance(sim, 1.0),
         "volley": lambda sim: _volleys(sim, grid),
         "swinging_foot": lambda sim: [
-            {"ball_speed": v, **physics_probes.swinging_foot(sim, v)} for v in (0.0, 10.0, 20.0)
+            {"ball_speed": v, **probes.swinging_foot(sim, v)} for v in (0.0, 10.0, 20.0)
         ],
     }
     report: dict = {"sim_kwargs": sim_kwargs, "cost": {}}

@@ -1,12 +1,13 @@
-"""The real-table packages' old import paths, kept working for one release.
+"""Old import paths, kept working for one release.
 
 ``foosball_gym.hardware``, ``vision``, ``play``, ``sysid`` and ``virtual_table`` moved into
-:mod:`foosball_gym.real_table`. Importing one of them by its old name, or any module inside it
-(``foosball_gym.vision.detectors``), gives the module at its new path, the very same object,
-so a class has one identity whichever name imported it, and warns with a
+:mod:`foosball_gym.real_table`; ``foosball_gym.physics_options`` and ``physics_probes`` into
+:mod:`foosball_gym.sim` as ``options`` and ``probes``. Importing one of them by its old name, or
+any module inside it (``foosball_gym.vision.detectors``), gives the module at its new path, the
+very same object, so a class has one identity whichever name imported it, and warns with a
 :class:`DeprecationWarning` naming the new path, pointing at the import (once per statement:
-``import foosball_gym.vision.detectors`` names the package). Nothing is loaded twice: the old
-name is only an entry in :data:`sys.modules` pointing at the module the new name loaded.
+``import foosball_gym.vision.detectors`` names the package). Nothing is loaded twice: the old name
+is only an entry in :data:`sys.modules` pointing at the module the new name loaded.
 """
 
 from __future__ import annotations
@@ -19,13 +20,15 @@ import warnings
 from collections.abc import Sequence
 from types import FrameType, ModuleType
 
-#: Each moved package: its old name, its new one.
+#: Each moved package or module: its old name, its new one.
 MOVED = {
     "foosball_gym.hardware": "foosball_gym.real_table.hardware",
     "foosball_gym.vision": "foosball_gym.real_table.vision",
     "foosball_gym.play": "foosball_gym.real_table.play",
     "foosball_gym.sysid": "foosball_gym.real_table.sysid",
     "foosball_gym.virtual_table": "foosball_gym.real_table.virtual",
+    "foosball_gym.physics_options": "foosball_gym.sim.options",
+    "foosball_gym.physics_probes": "foosball_gym.sim.probes",
 }
 
 

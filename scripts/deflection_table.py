@@ -2,7 +2,7 @@
 
     python scripts/deflection_table.py [--processes 2]
 
-Runs ``foosball_gym.physics_probes.deflection`` over a grid of ball speeds, incoming angles and
+Runs ``foosball_gym.sim.probes.deflection`` over a grid of ball speeds, incoming angles and
 ball-minus-figurine offsets and writes the directions the ball left in to
 ``foosball_gym/policies/deflection_table.npz`` (about 62,000 probes, 40 s on 2 cores). Run it
 again whenever the physics revision changes; ``tests/test_deflection.py`` checks the shipped
@@ -16,8 +16,9 @@ from multiprocessing import Pool
 
 import numpy as np
 
-from foosball_gym import physics_probes, table
+from foosball_gym import table
 from foosball_gym.policies.deflection import ANGLES, OFFSETS, SPEEDS, TABLE_PATH
+from foosball_gym.sim import probes
 
 _sim = None
 
@@ -31,7 +32,7 @@ def _row(job: tuple[float, float]) -> list[float]:
     speed, angle = job
     out = []
     for offset in OFFSETS:
-        found = physics_probes.deflection(_sim, float(speed), float(angle), float(offset))
+        found = probes.deflection(_sim, float(speed), float(angle), float(offset))
         out.append(np.nan if found["out_deg"] is None else found["out_deg"])
     return out
 

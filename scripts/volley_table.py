@@ -2,7 +2,7 @@
 
     python scripts/volley_table.py [--processes 1]
 
-Runs ``foosball_gym.physics_probes.volley`` over a grid of ball speeds, incoming angles,
+Runs ``foosball_gym.sim.probes.volley`` over a grid of ball speeds, incoming angles,
 ball-minus-figurine offsets and launch phases and writes the directions the ball left in to
 ``foosball_gym/policies/volley_table.npz`` (about 8,800 probes, about a minute on one core).
 Run it again whenever the physics revision changes; ``tests/test_volley.py`` checks the
@@ -16,8 +16,9 @@ from multiprocessing import Pool
 
 import numpy as np
 
-from foosball_gym import physics_probes, table
+from foosball_gym import table
 from foosball_gym.policies.volley import ANGLES, OFFSETS, PHASES, SPEEDS, TABLE_PATH
+from foosball_gym.sim import probes
 
 _sim = None
 
@@ -32,7 +33,7 @@ def _row(job: tuple[float, float]) -> list[list[float]]:
     out = []
     for offset in OFFSETS:
         found = [
-            physics_probes.volley(_sim, float(speed), float(angle), float(offset), phase)
+            probes.volley(_sim, float(speed), float(angle), float(offset), phase)
             for phase in PHASES
         ]
         out.append([np.nan if f["out_deg"] is None else f["out_deg"] for f in found])

@@ -11,8 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from foosball_gym import physics_probes as probes
-from foosball_gym.sim import TableSim
+from foosball_gym.sim import TableSim, probes
 from foosball_gym.table import BALL_RADIUS, BALL_TABLE_RESTITUTION, FIGURINE_FOOT_HEIGHT
 
 

@@ -8,9 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from foosball_gym import physics_probes
 from foosball_gym.policies import deflection
-from foosball_gym.sim import TableSim
+from foosball_gym.sim import TableSim, probes
 from foosball_gym.table import PHYSICS_REVISION
 
 
@@ -31,16 +30,16 @@ def test_the_shipped_table_is_what_the_simulator_measures_now(sim, i, j):
     table = deflection._table()[0]
     speed, angle = float(deflection.SPEEDS[i]), float(deflection.ANGLES[j])
     for k in range(60, 101, 8):  # offsets -5 mm to +5 mm: the flat and both edges
-        found = physics_probes.deflection(sim, speed, angle, float(deflection.OFFSETS[k]))
+        found = probes.deflection(sim, speed, angle, float(deflection.OFFSETS[k]))
         assert found["out_deg"] == pytest.approx(float(table[i, j, k]), abs=0.5), k
 
 
 def test_the_flat_face_returns_a_head_on_ball_straight_and_steepens_an_angled_one(sim):
-    straight = physics_probes.deflection(sim, 5.0, 0.0, 0.0)
+    straight = probes.deflection(sim, 5.0, 0.0, 0.0)
     assert straight["out_deg"] == pytest.approx(0.0, abs=0.5)
     # Restitution 0.5, less what the ball's own turning (still the way it came) brakes.
     assert 0.2 * 5.0 < straight["out_speed"] < 0.5 * 5.0
-    angled = physics_probes.deflection(sim, 5.0, 15.0, 0.002)
+    angled = probes.deflection(sim, 5.0, 15.0, 0.002)
     # Half the normal speed comes back, the sideways speed mostly stays: a steeper angle.
     assert 20.0 < angled["out_deg"] < 45.0
 
@@ -52,7 +51,7 @@ def test_the_flat_face_returns_a_head_on_ball_straight_and_steepens_an_angled_on
 def test_the_offset_found_sends_the_ball_where_it_was_asked(sim, angle_deg, want_deg):
     offset = deflection.deflection_offset(5.0, math.radians(angle_deg), math.radians(want_deg))
     assert offset is not None and abs(offset) < 0.015
-    found = physics_probes.deflection(sim, 5.0, angle_deg, offset)
+    found = probes.deflection(sim, 5.0, angle_deg, offset)
     assert found["out_deg"] == pytest.approx(want_deg, abs=2.0), offset
 
 

@@ -1,4 +1,5 @@
-"""The real-table packages' old import paths still work for a release, and say where they went."""
+"""The old import paths of the real-table packages and of the simulator's options and probes still
+work for a release, and say where they went."""
 
 from __future__ import annotations
 
@@ -10,13 +11,16 @@ import pytest
 
 from foosball_gym.old_paths import MOVED, new_name
 
-# A module of each moved package, by its old name, and something defined in it.
+# A module of each moved package (or the moved module itself), by its old name; the name that
+# moved; something defined in the module.
 OLD_MODULES = [
-    ("foosball_gym.hardware.config", "JointConfig"),
-    ("foosball_gym.vision.projection", "CameraCalibration"),
-    ("foosball_gym.play.session", "SessionLog"),
-    ("foosball_gym.sysid.logs", "PlayLog"),
-    ("foosball_gym.virtual_table.drive_states", "next_state"),
+    ("foosball_gym.hardware.config", "foosball_gym.hardware", "JointConfig"),
+    ("foosball_gym.vision.projection", "foosball_gym.vision", "CameraCalibration"),
+    ("foosball_gym.play.session", "foosball_gym.play", "SessionLog"),
+    ("foosball_gym.sysid.logs", "foosball_gym.sysid", "PlayLog"),
+    ("foosball_gym.virtual_table.drive_states", "foosball_gym.virtual_table", "next_state"),
+    ("foosball_gym.physics_options", "foosball_gym.physics_options", "check_physics"),
+    ("foosball_gym.physics_probes", "foosball_gym.physics_probes", "volley"),
 ]
 
 
@@ -37,20 +41,21 @@ def old_names_unloaded():
     unload()
 
 
-def test_every_moved_package_is_tried():
-    assert {name.rpartition(".")[0] for name, _ in OLD_MODULES} == set(MOVED)
+def test_every_moved_name_is_tried():
+    assert {moved for _, moved, _ in OLD_MODULES} == set(MOVED)
 
 
-@pytest.mark.parametrize(("old", "attribute"), OLD_MODULES)
-def test_an_old_path_warns_and_gives_the_module_at_its_new_path(old, attribute, old_names_unloaded):
+@pytest.mark.parametrize(("old", "package", "attribute"), OLD_MODULES)
+def test_an_old_path_warns_and_gives_the_module_at_its_new_path(
+    old, package, attribute, old_names_unloaded
+):
     if old.startswith("foosball_gym.vision"):
         pytest.importorskip("cv2")
     new = new_name(old)
-    package = old.rpartition(".")[0]
-    assert new is not None and new.startswith("foosball_gym.real_table.")
+    assert new is not None and new.startswith(("foosball_gym.real_table.", "foosball_gym.sim."))
     with pytest.warns(DeprecationWarning) as warned:
         module = importlib.import_module(old)
-    # One warning for the statement, naming where the package went, pointing at the importer.
+    # One warning for the statement, naming where the name went, pointing at the importer.
     assert [str(w.message) for w in warned] == [
         f"{package} has moved to {MOVED[package]}; import it from there "
         "(the old path goes in the next release)"

@@ -41,6 +41,22 @@ def test_only_the_simulator_package_imports_pybullet_in_one_module():
     assert outside == []
 
 
+def test_the_simulator_package_loads_pybullet_only_when_the_simulator_is_asked_for():
+    code = (
+        "import sys, foosball_gym.sim as sim;"
+        "from foosball_gym.sim.options import check_physics;"
+        "check_physics(480, 60);"
+        "assert 'pybullet' not in sys.modules, 'pybullet was imported';"
+        "names = {name: getattr(sim, name) for name in sim.__all__};"
+        "assert names['TableSim'].__module__ == 'foosball_gym.sim.table_sim';"
+        "assert 'pybullet' in sys.modules;"
+        "exec('try: sim.Tablesim\\nexcept AttributeError as e: print(e)')"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "module 'foosball_gym.sim' has no attribute 'Tablesim'"
+
+
 def test_importing_the_package_needs_no_torch_and_registers_the_ids():
     code = (
         "import sys, gymnasium as gym, foosball_gym;"
@@ -73,7 +89,9 @@ def test_options_are_checked_without_the_simulator():
         "bad = {'physics_hz': 250};"
         "exec('try: check_env_options(ENV_IDS[0], bad)\\nexcept ValueError: pass');"
         "assert 'pybullet' not in sys.modules, 'pybullet was imported';"
-        "assert not [m for m in sys.modules if m.startswith('foosball_gym.sim')];"
+        # Of the simulator, only the physics options' checks, which build nothing.
+        "sim = [m for m in sys.modules if m.startswith('foosball_gym.sim')];"
+        "assert sim == ['foosball_gym.sim', 'foosball_gym.sim.options'], sim;"
         "print(sizes)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

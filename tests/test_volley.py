@@ -10,12 +10,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from foosball_gym import physics_probes, table
+from foosball_gym import table
 from foosball_gym.evaluation import evaluate
 from foosball_gym.policies import scripted, volley
 from foosball_gym.policies.aiming import path_y
 from foosball_gym.registration import scripted_policy
-from foosball_gym.sim import TableSim
+from foosball_gym.sim import TableSim, probes
 from foosball_gym.table import PHYSICS_REVISION
 
 KEEPER = table.rod("home_keeper")
@@ -40,7 +40,7 @@ def test_the_shipped_table_is_what_the_simulator_measures_now(sim, i, j):
     speed, angle = float(volley.SPEEDS[i]), float(volley.ANGLES[j])
     for k in (4, 8, 10, 13):  # offsets -12, -4, 0 and +6 mm: the flat face and both ends
         for p, phase in enumerate(volley.PHASES):
-            found = physics_probes.volley(sim, speed, angle, float(volley.OFFSETS[k]), phase)
+            found = probes.volley(sim, speed, angle, float(volley.OFFSETS[k]), phase)
             want = float(directions[i, j, k, p])
             if math.isnan(want):
                 assert found["out_deg"] is None, (k, phase)
@@ -65,7 +65,7 @@ def _in_the_mouth(sim, speed: float, angle_deg: float, offset: float) -> int:
     """How many of the table's phases a fresh volley at ``offset`` sends into the mouth."""
     scored = 0
     for phase in volley.PHASES:
-        out = physics_probes.volley(sim, speed, angle_deg, offset, phase)["out_deg"]
+        out = probes.volley(sim, speed, angle_deg, offset, phase)["out_deg"]
         if out is not None:
             end = path_y(KEEPER.x, 0.0, math.radians(out), [table.GOAL_LINE_X])[-1]
             scored += abs(end) < table.GOAL_HALF_WIDTH
@@ -104,7 +104,7 @@ def test_a_ball_that_cannot_be_on_the_table_is_refused(cross, slope, speed, what
 @pytest.mark.parametrize("phase", [-0.1, 1.0, math.nan])
 def test_the_volley_probe_refuses_a_phase_outside_one_control_step(sim, phase):
     with pytest.raises(ValueError, match="phase"):
-        physics_probes.volley(sim, 4.0, 0.0, 0.0, phase)
+        probes.volley(sim, 4.0, 0.0, 0.0, phase)
 
 
 def test_the_volleying_keeper_lines_up_off_the_crossing_point_by_the_tables_offset():

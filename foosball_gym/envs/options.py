@@ -12,7 +12,7 @@ Each option is checked by what uses it: a task's own options by the task, the ob
 :func:`~foosball_gym.policy_io.observations.observation_options`, the reward weights by
 :class:`~foosball_gym.envs.rewards.RewardWeights`, ``camera_noise`` by
 :class:`~foosball_gym.camera.CameraNoise`, the physics by
-:func:`~foosball_gym.physics_options.check_physics`, ``opponent`` by
+:func:`~foosball_gym.sim.options.check_physics`, ``opponent`` by
 :func:`~foosball_gym.game.resolve_opponent`, and the rest here.
 """
 
@@ -38,9 +38,9 @@ from foosball_gym.envs.rewards import RewardWeights
 from foosball_gym.envs.rod_errors import RodErrors
 from foosball_gym.envs.safety_layer import check_safety_layer
 from foosball_gym.game import Policy, resolve_opponent
-from foosball_gym.physics_options import check_physics, check_randomisation
 from foosball_gym.policy_io.observations import check_flag, observation_options
 from foosball_gym.policy_io.task import TaskInterface
+from foosball_gym.sim.options import check_physics, check_randomisation
 from foosball_gym.tasks.base import Task
 
 RENDER_MODES = ("human", "rgb_array")

@@ -3,7 +3,7 @@
 A figurine's leg is flat in front, 18 mm wide, with rounded ends. Struck with the flat, the ball
 leaves straight along +x; struck with a rounded end, at an angle that grows with the sideways
 offset between ball and figurine at the moment of the kick. The table below was measured in the
-simulator (``foosball_gym.physics_probes.corner_kick``, physics revision 2) by kicking a resting
+simulator (``foosball_gym.sim.probes.corner_kick``, physics revision 2) by kicking a resting
 ball from the wind-up with the keeper at each offset; past 0.026 m the kick is too weak to aim.
 """
 

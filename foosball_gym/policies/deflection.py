@@ -8,7 +8,7 @@ offset between the ball's crossing point and the figurine picks the direction, a
 feet held still that direction depends on nothing but the ball's path: no swing has to be
 timed to a ball that moves 8 cm in one decision (1/60 s), which is what makes a volley miss.
 
-The table holds that direction, measured in the simulator (``physics_probes.deflection``,
+The table holds that direction, measured in the simulator (``sim.probes.deflection``,
 ``scripts/deflection_table.py``, physics revision in the file) over the ball's speed 0.55 m
 before the rod, its angle from -x and the offset; for a ball moving towards -y the picture is
 mirrored.

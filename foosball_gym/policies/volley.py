@@ -13,7 +13,7 @@ the mouth (less a margin). That share is smoothed over neighbouring offsets, sin
 crossing point a camera and a filter give is a few millimetres off, and an offset is used
 only where it beats the flat face's.
 
-The table holds the directions, measured in the simulator (``physics_probes.volley``,
+The table holds the directions, measured in the simulator (``sim.probes.volley``,
 ``scripts/volley_table.py``, physics revision in the file) over the ball's speed, its angle
 from -x (positive towards +y), the ball-minus-figurine offset and the phase of the ball's
 start within a control step. A ball is read at the nearest measured speed and angle.

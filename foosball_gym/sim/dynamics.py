@@ -8,7 +8,7 @@ from typing import Protocol
 import numpy as np
 
 from foosball_gym import table
-from foosball_gym.physics_options import PER_DRIVE
+from foosball_gym.sim.options import PER_DRIVE
 
 
 class Randomisable(Protocol):

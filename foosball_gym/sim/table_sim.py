@@ -41,10 +41,10 @@ import numpy as np
 
 from foosball_gym import table
 from foosball_gym.camera import CameraModel
-from foosball_gym.physics_options import check_physics
 from foosball_gym.sim.contacts import Reach
 from foosball_gym.sim.drives import CONTROL_MODES, RodDrives, drive_acceleration
 from foosball_gym.sim.dynamics import draw_dynamics
+from foosball_gym.sim.options import check_physics
 from foosball_gym.sim.view import View, check_image_size
 from foosball_gym.sim.worlds import ERP_RATE, UPRIGHT, TableWorlds, World, drive_masses
 

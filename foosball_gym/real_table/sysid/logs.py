@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from foosball_gym import table
-from foosball_gym.physics_options import PHYSICS_DEFAULTS, RANDOMISATION_BOUNDS, check_physics
 from foosball_gym.session_log import SessionLogError, read_session_log
+from foosball_gym.sim.options import PHYSICS_DEFAULTS, RANDOMISATION_BOUNDS, check_physics
 
 #: The environment options that make a simulated table's physics what it is: two simulated
 #: tables with different values are different tables.

@@ -22,7 +22,7 @@ from foosball_gym import table
 from foosball_gym.policies.scripted import KICK_ANGLE, WIND_UP_ANGLE
 
 if TYPE_CHECKING:  # only for the hints: importing the simulator would import pybullet
-    from foosball_gym.sim import TableSim
+    from foosball_gym.sim.table_sim import TableSim
 
 R = table.BALL_RADIUS
 # Where the ball's centre is when it touches a side wall.
