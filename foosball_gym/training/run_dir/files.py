@@ -100,7 +100,7 @@ def read_latest(run: Path) -> dict[str, Any] | None:
     steps = pointer.get("timesteps")
     if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
         raise ValueError(f"{path}: timesteps must be a whole number, 0 or more, got {steps!r}")
-    for key in ("model", "vecnormalize", "checkpoint"):
+    for key in ("model", "vecnormalize", "checkpoint", "replay"):
         if key in pointer and (not isinstance(pointer[key], str) or "/" in pointer[key]):
             raise ValueError(f"{path}: {key} must name a file in {CHECKPOINT_DIR}/")
     return pointer

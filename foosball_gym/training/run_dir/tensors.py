@@ -55,10 +55,11 @@ def save_tensors(value: Any, path: Path) -> None:
     write_bytes(path, buffer.getvalue())
 
 
-def load_tensors(path: Path) -> Any:
+def load_tensors(path: Path, limit: int | None = None) -> Any:
     """What :func:`save_tensors` wrote, its tensors as numpy arrays (refused, ValueError,
-    where it says it inflates past :data:`~.storage.MODEL_SIZE_LIMIT`)."""
+    where it says it inflates past ``limit`` bytes, :data:`~.storage.MODEL_SIZE_LIMIT` unless
+    given)."""
     import torch as th
 
-    check_torch_file(path)
+    check_torch_file(path, limit)
     return _to_arrays(th.load(path, map_location="cpu", weights_only=True))

@@ -18,6 +18,7 @@ from foosball_gym.training.run_dir.best import BestModel
 from foosball_gym.training.run_dir.curve import EVAL_SEED, EvalCurve, eval_row
 from foosball_gym.training.run_dir.files import CHECKPOINT_DIR, MODEL_FILE, write_latest
 from foosball_gym.training.run_dir.storage import save_model
+from foosball_gym.training.sb3.replay import drop_old_replays, write_run_replay
 from foosball_gym.training.signals import Interrupted, SignalStop
 
 
@@ -158,22 +159,42 @@ class CheckpointCallback(BaseCallback):
         self.dir = out / CHECKPOINT_DIR
         self.every = every
         self._next = 0
+        self._wait_for_rollout = False
+        self._due = False
 
     def _on_training_start(self) -> None:
         self.dir.mkdir(parents=True, exist_ok=True)
         self._next = (self.num_timesteps // self.every + 1) * self.every
+        # SB3 stores a step's transitions after its callbacks: an off-policy model's checkpoint
+        # waits for the end of the rollout, so that its buffer holds every step it counts.
+        self._wait_for_rollout = getattr(self.model, "replay_buffer", None) is not None
+        self._due = False
 
     def _on_step(self) -> bool:
         if self.num_timesteps >= self._next:
             self._next += self.every
-            self.write()
+            if self._wait_for_rollout:
+                self._due = True
+            else:
+                self.write()
         return True
+
+    def _on_rollout_end(self) -> None:
+        if self._due:
+            self._due = False
+            self.write()
 
     def write(self) -> None:
         self.dir.mkdir(parents=True, exist_ok=True)
         name = f"model_{self.num_timesteps:010d}"
         save_model(self.model, self.dir / f"{name}.zip")
-        write_latest(self.out, {"model": f"{name}.zip", "timesteps": int(self.num_timesteps)})
+        pointer: dict[str, Any] = {"model": f"{name}.zip", "timesteps": int(self.num_timesteps)}
+        replay = write_run_replay(self.model, self.out, self.num_timesteps)
+        if replay is not None:
+            pointer["replay"] = replay
+        write_latest(self.out, pointer)
+        if replay is not None:
+            drop_old_replays(self.out, keep=replay)
 
 
 class StopOnSignal(SignalStop, BaseCallback):

@@ -46,6 +46,7 @@ from foosball_gym.training.sb3.callbacks import (
 from foosball_gym.training.sb3.curriculum import ServeCurriculum
 from foosball_gym.training.sb3.model import build_model, load_checkpoint
 from foosball_gym.training.sb3.pretrain import pretrain
+from foosball_gym.training.sb3.replay import restore_run_replay
 from foosball_gym.training.sb3.teacher import TeacherCallback
 from foosball_gym.training.sb3.vec_env import make_env
 from foosball_gym.training.sb3.videos import VideoCallback
@@ -209,10 +210,11 @@ def _train(
     extended: bool,
 ) -> TrainResult:
     venv = make_env(config)
-    done_steps, wall_offset = 0, 0.0
+    done_steps, wall_offset, restored = 0, 0.0, None
     try:
         if continuing:
             model, done_steps = load_checkpoint(config, out, venv)
+            restored = restore_run_replay(model, out)
             set_aside_after(out, done_steps, config.env_id)
             wall_offset = EvalCurve(out, config.env_id).wall_seconds()
             if extended:
@@ -283,6 +285,13 @@ def _train(
     total = steps_run(model, done_steps, remaining) if remaining else done_steps
     if continuing:
         print(f"continuing {out} from its checkpoint at step {done_steps:,}, to {total:,}")
+        if restored == 0:
+            print(
+                "its checkpoint holds no replay buffer (written before buffers were kept): "
+                f"{type(model).__name__} goes on from an empty one"
+            )
+        elif restored is not None:
+            print(f"with the {restored:,} transitions of its replay buffer")
     # Rounding up by a rollout is worth a word where it is no small part of the run.
     if total - max(config.timesteps, done_steps) > config.timesteps // 10:
         print(
