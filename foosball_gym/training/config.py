@@ -26,7 +26,8 @@ from foosball_gym.training.selfplay.rule import SELFPLAY_RULES, check_rule, defa
 if TYPE_CHECKING:
     from foosball_gym.envs.base import FoosballEnv
 
-ALGORITHMS = ("ppo", "sac")
+# crossq: sb3-contrib's CrossQ, SAC without target networks and with batch renormalisation.
+ALGORITHMS = ("ppo", "sac", "crossq")
 VEC_ENV_KINDS = ("dummy", "subproc", "batched")
 LR_SCHEDULES = ("constant", "linear")
 # The defaults before they became the from-scratch recipe: a run's config.json written before

@@ -9,7 +9,7 @@ from typing import Any
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.vec_env import VecNormalize
 
-from foosball_gym.training.config import ALGORITHMS, TrainConfig
+from foosball_gym.training.config import TrainConfig
 from foosball_gym.training.run_dir.files import (
     CHECKPOINT_DIR,
     CONFIG_FILE,
@@ -26,9 +26,6 @@ from foosball_gym.training.run_dir.storage import (
     statistics_beside,
     zip_statistics,
 )
-
-ALGOS = dict(zip(ALGORITHMS, (PPO, SAC), strict=True))
-
 
 def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
     policy_kwargs: dict[str, Any] = {"net_arch": list(config.net_arch)}
@@ -65,6 +62,12 @@ def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
             ent_coef=config.ent_coef,
             policy_kwargs=policy_kwargs,
             **common,
+        )
+    if config.algo == "crossq":
+        from sb3_contrib import CrossQ
+
+        return CrossQ(
+            "MlpPolicy", venv, batch_size=config.batch_size, policy_kwargs=policy_kwargs, **common
         )
     return SAC(
         "MlpPolicy", venv, batch_size=config.batch_size, policy_kwargs=policy_kwargs, **common

@@ -1,4 +1,5 @@
-"""A resumed SAC run goes on with the replay buffer it had, not from an empty one."""
+"""Off-policy runs (SAC, CrossQ) train, evaluate, and resume with the replay buffer they had, not
+from an empty one."""
 
 from __future__ import annotations
 
@@ -13,14 +14,14 @@ from stable_baselines3.common.buffers import ReplayBuffer  # noqa: E402
 from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.training.sb3.replay import FIELDS, restore_replay, save_replay  # noqa: E402
 
-# A small SAC run, a checkpoint every 100 steps.
-SMALL_SAC = ["--algo", "sac", "--n-envs", "2", "--checkpoint-freq", "100", "--batch-size", "32"]
-SMALL_SAC += ["--lr-schedule", "constant", "--eval-freq", "100000", "--eval-episodes", "1"]
-SMALL_SAC += ["--no-progress"]
+# A small run, a checkpoint every 100 steps.
+SMALL = ["--n-envs", "2", "--checkpoint-freq", "100", "--batch-size", "32"]
+SMALL += ["--lr-schedule", "constant", "--eval-freq", "100000", "--eval-episodes", "1"]
+SMALL += ["--no-progress"]
 
 
-def train(*argv: str) -> int:
-    return main(["train", "Foosball-Block-v0", *argv, *SMALL_SAC])
+def train(*argv: str, algo: str = "sac") -> int:
+    return main(["train", "Foosball-Block-v0", *argv, "--algo", algo, *SMALL])
 
 
 def small_buffer(size: int = 64, n_envs: int = 2) -> ReplayBuffer:
@@ -60,9 +61,10 @@ def test_a_buffer_that_does_not_fit_the_run_is_refused_with_what_differs(tmp_pat
         restore_replay(small_buffer(), tmp_path / "other.pt")
 
 
-def test_a_resumed_sac_run_goes_on_with_its_replay_buffer(tmp_path, capsys):
+@pytest.mark.parametrize("algo", ["sac", "crossq"])
+def test_a_resumed_run_goes_on_with_its_replay_buffer(tmp_path, capsys, algo):
     run = tmp_path / "run"
-    assert train("--timesteps", "200", "--out", str(run)) == 0
+    assert train("--timesteps", "200", "--out", str(run), algo=algo) == 0
     # One buffer, the last checkpoint's: each is as large as the experience it holds.
     kept = [p.name for p in (run / "checkpoints").glob("replay_*.pt")]
     assert kept == ["replay_0000000200.pt"]
@@ -81,3 +83,10 @@ def test_a_checkpoint_from_before_buffers_were_kept_says_it_starts_empty(tmp_pat
     capsys.readouterr()
     assert main(["train", "--resume", str(run), "--timesteps", "200", "--no-progress"]) == 0
     assert "SAC goes on from an empty one" in capsys.readouterr().out
+
+
+def test_a_crossq_run_is_evaluated_by_its_folder(tmp_path, capsys):
+    run = tmp_path / "run"
+    assert train("--timesteps", "200", "--out", str(run), algo="crossq") == 0
+    assert main(["eval", str(run), "--episodes", "2", "--seed", "3"]) == 0
+    assert "episodes             2 (seeds 3..4)" in capsys.readouterr().out
