@@ -457,6 +457,21 @@ def test_play_real_stops_a_table_whose_camera_gives_its_last_picture_under_new_t
         assert drive.state == OFF
 
 
+def test_the_real_time_tables_clock_never_runs_back(tables_seen):
+    """The drives' events carry the table's clock: from the making of the table through the
+    drives' switching on, the table's start and its stop. It ran back once when the table
+    started (by however long the switching on took, a second on a loaded machine), so an event
+    before the start could look as if it came after one that followed it."""
+    play_sim(
+        swinging(), "Foosball-Block-v0", {}, episodes=1, camera_size=SMALL_CAMERA, realtime=True
+    )
+    (drives,) = tables_seen
+    for events, _, _ in drives.values():
+        times = [e.t for e in events]
+        assert times == sorted(times)
+        assert [e.what for e in events][:3] == ["controlword"] * 3  # switched on first
+
+
 def test_a_killed_camera_process_stops_the_table_with_one_error_and_no_traceback(
     monkeypatch, tables_seen, capfd
 ):

@@ -268,8 +268,11 @@ class SimulatedTable:
     # ------------------------------------------------------------------ time
 
     def clock(self) -> float:
-        """The table's time (s): simulated in lock-step, the wall clock's in real time."""
-        if self.realtime:
+        """The table's time (s): simulated in lock-step; in real time the wall clock's from the
+        moment the table starts (:meth:`start`), and its simulated time before, so that it never
+        runs back (it did, by however long the drives took to switch on, where the wall clock
+        counted from the table's making)."""
+        if self.realtime and self._thread is not None:
             return time.monotonic() - self._t0
         return self.time
 
