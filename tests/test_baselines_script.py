@@ -84,3 +84,11 @@ def test_the_table_gives_the_interquartile_mean_over_seeds_with_an_interval(base
     assert cell["iqm"] == pytest.approx((0.98 + 0.99 + 0.99) / 3)
     assert cell["low"] <= cell["iqm"] <= cell["high"]
     assert cell["min"] == 0.5 and cell["median"] == 0.99 and cell["wall_median"] == 61
+
+
+def test_every_task_names_a_recipe_that_loads_for_its_environment(baselines):
+    pytest.importorskip("yaml")
+    from foosball_gym.training.config_file import load_train_config
+
+    for name, task in baselines.TASKS.items():
+        assert load_train_config(task.recipe).env_id == task.env_id, name
