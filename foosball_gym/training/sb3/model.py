@@ -27,6 +27,7 @@ from foosball_gym.training.run_dir.storage import (
     zip_statistics,
 )
 
+
 def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
     policy_kwargs: dict[str, Any] = {"net_arch": list(config.net_arch)}
     if config.adam_eps is not None or config.fused_adam:
