@@ -55,8 +55,12 @@ def restore_replay(buffer: Any, path: Path) -> int:
     limit = sum(a.nbytes for a in arrays.values()) + _OVERHEAD
     try:
         value = load_tensors(path, limit)
-    except Exception as err:  # torch names what it could not read in its own words
+    except ValueError as err:  # larger than this buffer could have written
         raise ValueError(f"{path} is not a replay buffer this run wrote: {err}") from None
+    except Exception:  # noqa: BLE001 - torch's own text is pages long and says to unpickle
+        raise ValueError(
+            f"{path} is not a replay buffer this run wrote: not a file of plain tensors"
+        ) from None
     if not isinstance(value, dict):
         raise ValueError(f"{path} is not a replay buffer this run wrote")
     for key, want in (("buffer_size", buffer.buffer_size), ("n_envs", buffer.n_envs)):
