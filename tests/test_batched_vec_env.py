@@ -10,6 +10,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 import foosball_gym  # noqa: F401
 from foosball_gym.training.sb3.batched_vec_env import BatchedSubprocVecEnv
+from foosball_gym.training.sb3.in_process_vec_env import InProcessVecEnv
 
 ENV = "Foosball-Block-v0"
 
@@ -28,17 +29,27 @@ def _play(vec_env_cls: type, actions: np.ndarray, **kwargs: object) -> tuple[lis
         venv.close()
 
 
-def test_batched_workers_give_the_steps_a_dummy_vec_env_gives() -> None:
+@pytest.mark.parametrize("kind", ["batched", "batched, one share here", "in process"])
+def test_the_vec_envs_give_the_steps_a_dummy_vec_env_gives(kind: str) -> None:
     actions = np.random.default_rng(0).uniform(-1, 1, (120, 5, 1)).astype(np.float32)
     dummy, dummy_infos = _play(DummyVecEnv, actions)
-    # 5 environments over 2 workers: shares of 2 and 3 (or 3 and 2), not a whole division.
-    batched, batched_infos = _play(BatchedSubprocVecEnv, actions, vec_env_kwargs={"workers": 2})
+    if kind.startswith("batched"):
+        # 5 environments over 2 workers: shares of 2 and 3 (or 3 and 2), not a whole division.
+        kwargs = {"workers": 2, "here": kind.endswith("here")}
+        batched, batched_infos = _play(BatchedSubprocVecEnv, actions, vec_env_kwargs=kwargs)
+    else:
+        batched, batched_infos = _play(InProcessVecEnv, actions)
     for a, b in zip(dummy, batched, strict=True):
         np.testing.assert_array_equal(a, b)
     finals = 0
     for step_a, step_b in zip(dummy_infos, batched_infos, strict=True):
         for info_a, info_b in zip(step_a, step_b, strict=True):
             assert info_a.keys() == info_b.keys()
+            for key in info_a.keys() - {"terminal_observation", "episode"}:
+                assert info_a[key] == info_b[key], key
+            if "episode" in info_a:  # the Monitor's, with its wall time
+                assert info_a["episode"]["r"] == info_b["episode"]["r"]
+                assert info_a["episode"]["l"] == info_b["episode"]["l"]
             if "terminal_observation" in info_a:
                 finals += 1
                 np.testing.assert_array_equal(
@@ -47,9 +58,10 @@ def test_batched_workers_give_the_steps_a_dummy_vec_env_gives() -> None:
     assert finals > 5  # episodes ended and were reset within the steps compared
 
 
-def test_calls_reach_the_environments_they_name() -> None:
+@pytest.mark.parametrize("here", [False, True])
+def test_calls_reach_the_environments_they_name(here: bool) -> None:
     venv = BatchedSubprocVecEnv(
-        [lambda: __import__("gymnasium").make(ENV) for _ in range(5)], workers=2
+        [lambda: __import__("gymnasium").make(ENV) for _ in range(5)], workers=2, here=here
     )
     try:
         assert venv.workers == 2
@@ -65,13 +77,17 @@ def test_calls_reach_the_environments_they_name() -> None:
         venv.close()  # twice is harmless, as SB3's own
 
 
-def test_a_failure_in_a_worker_is_raised_in_the_main_process_and_the_worker_lives_on() -> None:
+@pytest.mark.parametrize("here", [False, True])
+def test_a_failure_in_a_worker_is_raised_in_the_main_process_and_the_worker_lives_on(
+    here: bool,
+) -> None:
     venv = BatchedSubprocVecEnv(
-        [lambda: __import__("gymnasium").make(ENV) for _ in range(2)], workers=2
+        [lambda: __import__("gymnasium").make(ENV) for _ in range(2)], workers=2, here=here
     )
     try:
-        with pytest.raises(AttributeError, match="no_such_method"):
-            venv.env_method("no_such_method", indices=[1])
+        for index in (0, 1):  # the share here, if there is one, and a worker's
+            with pytest.raises(AttributeError, match="no_such_method"):
+                venv.env_method("no_such_method", indices=[index])
         venv.reset()
         obs, _, _, _ = venv.step(np.zeros((2, 1), np.float32))
         assert obs.shape == (2, 6)
@@ -105,3 +121,31 @@ def test_a_run_trains_the_same_policy_with_its_environments_batched_or_in_proces
     assert weights["dummy"].keys() == weights["batched"].keys()
     for name, value in weights["dummy"].items():
         assert torch.equal(value, weights["batched"][name]), name
+
+
+def test_in_process_infos_are_the_caller_s_to_keep() -> None:
+    # Without SB3's deep copy, no later step may change what an earlier one returned.
+    venv = make_vec_env(ENV, n_envs=2, seed=3, vec_env_cls=InProcessVecEnv)
+    try:
+        venv.reset()
+        kept = []
+        for _ in range(150):
+            _, _, _, infos = venv.step(np.zeros((2, 1), np.float32))
+            snapshot = [
+                {k: np.copy(v) if k == "terminal_observation" else v for k, v in info.items()}
+                for info in infos
+            ]
+            kept.append((infos, snapshot))
+        finals = 0
+        for infos, snapshot in kept:
+            for info, then in zip(infos, snapshot, strict=True):
+                assert info.keys() == then.keys()
+                for key, value in then.items():
+                    if key == "terminal_observation":
+                        finals += 1
+                        np.testing.assert_array_equal(info[key], value)
+                    else:
+                        assert info[key] == value, key
+        assert finals > 2
+    finally:
+        venv.close()

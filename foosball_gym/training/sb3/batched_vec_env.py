@@ -3,8 +3,9 @@ each stepping its share in turn.
 
 SB3's ``SubprocVecEnv`` gives every environment a process of its own: with 16 environments on
 2 cores, 16 processes take turns and each step is 16 messages each way. Here each worker holds
-a :class:`~stable_baselines3.common.vec_env.DummyVecEnv` of its share (so that resets, final
-observations, seeds and ``env_method`` behave exactly as SB3's own), and a step is one message
+an :class:`~foosball_gym.training.sb3.in_process_vec_env.InProcessVecEnv` of its share (SB3's
+``DummyVecEnv``: resets, final observations, seeds and ``env_method`` behave exactly as SB3's
+own), and a step is one message
 each way per worker. Seeded alike, it gives the same observations, rewards and infos as a
 ``DummyVecEnv`` of the same environments.
 """
@@ -19,13 +20,15 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
+from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import (
     CloudpickleWrapper,
     VecEnvIndices,
     VecEnvObs,
     VecEnvStepReturn,
 )
+
+from foosball_gym.training.sb3.in_process_vec_env import InProcessVecEnv
 
 
 class _Failure:
@@ -42,6 +45,38 @@ def _answer(remote: Any) -> Any:
     return answer
 
 
+def _handle(envs: InProcessVecEnv, cmd: str, data: Any) -> Any:
+    """A worker's answer to one command (``close`` answers nothing)."""
+    if cmd == "step":
+        envs.step_async(data)
+        return (*envs.step_wait(), envs.reset_infos)
+    if cmd == "reset":
+        seeds, options = data
+        for i, (seed, option) in enumerate(zip(seeds, options)):
+            envs._seeds[i], envs._options[i] = seed, option
+        return envs.reset(), envs.reset_infos
+    if cmd == "close":
+        envs.close()
+        return None
+    if cmd == "get_spaces":
+        return envs.observation_space, envs.action_space, envs.render_mode
+    if cmd == "env_method":
+        name, args, kwargs, indices = data
+        return envs.env_method(name, *args, indices=indices, **kwargs)
+    if cmd == "get_attr":
+        return envs.get_attr(data[0], indices=data[1])
+    if cmd == "has_attr":
+        return envs.has_attr(data)
+    if cmd == "set_attr":
+        envs.set_attr(data[0], data[1], indices=data[2])
+        return None
+    if cmd == "is_wrapped":
+        return envs.env_is_wrapped(data[0], indices=data[1])
+    if cmd == "render":
+        return envs.get_images()
+    raise NotImplementedError(f"unknown command {cmd!r}")
+
+
 def _worker(remote: Any, parent_remote: Any, env_fns: CloudpickleWrapper) -> None:
     # Ctrl-C reaches every process of the terminal's group; the main process alone stops the
     # run, after writing a checkpoint, and a worker gone first would break its last steps.
@@ -50,45 +85,43 @@ def _worker(remote: Any, parent_remote: Any, env_fns: CloudpickleWrapper) -> Non
     # The functions reach the worker by value, so nothing has registered the ids here.
     import foosball_gym.registration  # noqa: F401
 
-    envs = DummyVecEnv(env_fns.var)
+    envs = InProcessVecEnv(env_fns.var)
     while True:
         try:
             cmd, data = remote.recv()
         except EOFError:
             break
         try:
-            if cmd == "step":
-                envs.step_async(data)
-                remote.send((*envs.step_wait(), envs.reset_infos))
-            elif cmd == "reset":
-                seeds, options = data
-                for i, (seed, option) in enumerate(zip(seeds, options)):
-                    envs._seeds[i], envs._options[i] = seed, option
-                remote.send((envs.reset(), envs.reset_infos))
-            elif cmd == "close":
-                envs.close()
-                remote.close()
-                break
-            elif cmd == "get_spaces":
-                remote.send((envs.observation_space, envs.action_space, envs.render_mode))
-            elif cmd == "env_method":
-                name, args, kwargs, indices = data
-                remote.send(envs.env_method(name, *args, indices=indices, **kwargs))
-            elif cmd == "get_attr":
-                remote.send(envs.get_attr(data[0], indices=data[1]))
-            elif cmd == "has_attr":
-                remote.send(envs.has_attr(data))
-            elif cmd == "set_attr":
-                envs.set_attr(data[0], data[1], indices=data[2])
-                remote.send(None)
-            elif cmd == "is_wrapped":
-                remote.send(envs.env_is_wrapped(data[0], indices=data[1]))
-            elif cmd == "render":
-                remote.send(envs.get_images())
-            else:
-                raise NotImplementedError(f"unknown command {cmd!r}")
+            answer = _handle(envs, cmd, data)
         except Exception as err:  # noqa: BLE001  (the main process raises it)
             remote.send(_Failure(err))
+            continue
+        if cmd == "close":
+            remote.close()
+            break
+        remote.send(answer)
+
+
+class _Here:
+    """The main process's own share, spoken to as a worker's pipe is: a command sent is run
+    when its answer is asked for, so the share steps while the workers step theirs."""
+
+    def __init__(self, env_fns: list[Callable[[], gym.Env]]) -> None:
+        self.envs = InProcessVecEnv(env_fns)
+        self.pending: list[tuple[str, Any]] = []
+
+    def send(self, message: tuple[str, Any]) -> None:
+        self.pending.append(message)
+
+    def recv(self) -> Any:
+        cmd, data = self.pending.pop(0)
+        try:
+            return _handle(self.envs, cmd, data)
+        except Exception as err:  # noqa: BLE001  (raised by _answer, as a worker's)
+            return _Failure(err)
+
+    def close(self) -> None:
+        pass
 
 
 def default_workers(n_envs: int) -> int:
@@ -105,9 +138,12 @@ class BatchedSubprocVecEnv(VecEnv):
 
     Args:
         env_fns: one function per environment that builds it.
-        workers: worker processes; the environments are split between them as evenly as
-            they go, in order (the first worker holds the first share).
+        workers: processes that step environments; the environments are split between them
+            as evenly as they go, in order (the first worker holds the first share).
         start_method: as SB3's ``SubprocVecEnv``: forkserver where there is one, else spawn.
+        here: the main process is the first worker: it steps its share while the others step
+            theirs, so one core's worth of environments needs no messages and the workers'
+            wake-ups hide behind it.
     """
 
     def __init__(
@@ -115,6 +151,7 @@ class BatchedSubprocVecEnv(VecEnv):
         env_fns: list[Callable[[], gym.Env]],
         workers: int | None = None,
         start_method: str | None = None,
+        here: bool = False,
     ) -> None:
         n_envs = len(env_fns)
         if n_envs < 1:
@@ -130,10 +167,13 @@ class BatchedSubprocVecEnv(VecEnv):
             methods = mp.get_all_start_methods()
             start_method = "forkserver" if "forkserver" in methods else "spawn"
         ctx = mp.get_context(start_method)
-        pipes = [ctx.Pipe() for _ in self._slices]
-        self.remotes = [parent for parent, _ in pipes]
+        away = self._slices[1:] if here else self._slices
+        pipes = [ctx.Pipe() for _ in away]
+        self.remotes: list[Any] = [parent for parent, _ in pipes]
+        if here:
+            self.remotes.insert(0, _Here(env_fns[self._slices[0]]))
         self.processes = []
-        for (parent, child), share in zip(pipes, self._slices):
+        for (parent, child), share in zip(pipes, away):
             args = (child, parent, CloudpickleWrapper(env_fns[share]))
             # daemon: a worker must not outlive a main process that crashed.
             process = ctx.Process(target=_worker, args=args, daemon=True)  # type: ignore[attr-defined]
@@ -184,6 +224,9 @@ class BatchedSubprocVecEnv(VecEnv):
                 remote.recv()
         for remote in self.remotes:
             remote.send(("close", None))
+        for remote in self.remotes:
+            if isinstance(remote, _Here):
+                remote.recv()
         for process in self.processes:
             process.join()
         for remote in self.remotes:

@@ -9,13 +9,14 @@ from typing import Any
 
 import numpy as np
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
 import foosball_gym.registration  # noqa: F401  (the package registers the ids)
 from foosball_gym.policy_io.task import residual_scale
 from foosball_gym.training.config import VEC_ENV_KINDS, TrainConfig
 from foosball_gym.training.loading.loader import whole_action_policy
 from foosball_gym.training.sb3.batched_vec_env import BatchedSubprocVecEnv, default_workers
+from foosball_gym.training.sb3.in_process_vec_env import InProcessVecEnv
 from foosball_gym.training.selfplay.opponents import OpponentActionWrapper, SelfPlayVecEnv
 
 
@@ -40,14 +41,16 @@ def subproc_vec_env(env_fns: list[Callable[[], Any]], **kwargs: Any) -> SubprocV
 
 def batched_vec_env(env_fns: list[Callable[[], Any]], **kwargs: Any) -> Any:
     """``BatchedSubprocVecEnv`` over one worker per core; with a single worker's share (one
-    environment, or one core), a ``DummyVecEnv`` in this process, which steps alike without
-    the messages."""
+    environment, or one core), an :class:`InProcessVecEnv` in this process, which steps alike
+    without the messages."""
     if kwargs.get("workers", default_workers(len(env_fns))) == 1:
-        return DummyVecEnv(env_fns)
-    return BatchedSubprocVecEnv(env_fns, **kwargs)
+        return InProcessVecEnv(env_fns)
+    return BatchedSubprocVecEnv(env_fns, **{"here": True, **kwargs})
 
 
-VEC_ENVS = dict(zip(VEC_ENV_KINDS, (DummyVecEnv, subproc_vec_env, batched_vec_env), strict=True))
+VEC_ENVS = dict(
+    zip(VEC_ENV_KINDS, (InProcessVecEnv, subproc_vec_env, batched_vec_env), strict=True)
+)
 
 
 def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:

@@ -1,0 +1,34 @@
+"""Environments stepped one after the other in the training process."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+
+class InProcessVecEnv(DummyVecEnv):
+    """SB3's ``DummyVecEnv``, without its deep copy of every step's infos.
+
+    The environments return a fresh info dict of numbers each step, so copying the list is
+    enough; the deep copy cost about a third as much as stepping Block (29 µs of 16
+    environments' step, against 58 µs for the simulation).
+    """
+
+    def step_wait(self) -> Any:
+        for i, env in enumerate(self.envs):
+            obs, self.buf_rews[i], terminated, truncated, info = env.step(self.actions[i])
+            self.buf_dones[i] = terminated or truncated
+            info["TimeLimit.truncated"] = truncated and not terminated
+            if self.buf_dones[i]:
+                info["terminal_observation"] = np.copy(obs)
+                obs, self.reset_infos[i] = env.reset()
+            self.buf_infos[i] = info
+            self._save_obs(i, obs)
+        return (
+            self._obs_from_buf(),
+            np.copy(self.buf_rews),
+            np.copy(self.buf_dones),
+            list(self.buf_infos),
+        )
