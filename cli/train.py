@@ -14,7 +14,13 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from foosball_gym.training.config import ALGORITHMS, LR_SCHEDULES, VEC_ENV_KINDS, TrainConfig
+from foosball_gym.training.config import (
+    ALGORITHMS,
+    LEARNERS,
+    LR_SCHEDULES,
+    VEC_ENV_KINDS,
+    TrainConfig,
+)
 from foosball_gym.training.config_file import (
     SHIPPED,
     ConfigFileError,
@@ -65,6 +71,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "batch_size": {"type": positive_int},
     "learning_rate": {"type": positive_number},
     "lr_schedule": {"choices": LR_SCHEDULES},
+    "learner": {"choices": LEARNERS},
     "pretrain_episodes": {"type": whole_number, "metavar": "N"},
     "teacher_steps": {"type": whole_number, "metavar": "N"},
     "teacher": {"metavar": "scripted|MODEL"},

@@ -27,7 +27,8 @@ Differences from the SB3 backend: PPO only, two-player tasks only (self-play is 
 observations are not normalised (RLlib's MeanStdFilter would feed the frozen opponents the
 away side's running statistics, not those they were trained with), so ``normalize`` is
 recorded as false, and so are ``normalize_reward`` and ``fused_adam`` (rewards are not scaled;
-the optimiser is RLlib's own Adam, ``adam_eps`` recorded as null); ``target_kl`` and
+the optimiser is RLlib's own Adam, ``adam_eps`` recorded as null, and its update its own,
+``learner`` recorded as torch); ``target_kl`` and
 ``pretrain_episodes`` are not supported; resuming keeps
 the weights, the optimiser's state, the pool and the curve.
 

@@ -129,9 +129,10 @@ def train_rllib(
                 stacklevel=2,
             )
     check_rllib_config(config, num_workers)
-    # Recorded as run: RLlib scales neither observations nor rewards here, and its Adam is its own.
+    # Recorded as run: RLlib scales neither observations nor rewards here, and its Adam and its
+    # update are its own (PyTorch).
     config.normalize = config.normalize_reward = False
-    config.adam_eps, config.fused_adam = None, False
+    config.adam_eps, config.fused_adam, config.learner = None, False, "torch"
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out} is a file, not a run directory")
     th.set_num_threads(config.torch_threads)

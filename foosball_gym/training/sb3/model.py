@@ -51,7 +51,12 @@ def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
     }
     if config.algo == "ppo":
         policy_kwargs["log_std_init"] = config.log_std_init
-        return PPO(
+        ppo = PPO
+        if config.learner == "jax":
+            from foosball_gym.training.sb3.jax_ppo import JaxPPO
+
+            ppo = JaxPPO
+        return ppo(
             "MlpPolicy",
             venv,
             n_steps=config.n_steps,

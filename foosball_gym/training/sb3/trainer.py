@@ -53,6 +53,9 @@ from foosball_gym.training.sb3.videos import VideoCallback
 from foosball_gym.training.selfplay.callback import SelfPlayCallback
 from foosball_gym.training.selfplay.gate import ReplacementGate
 
+# As their authors write them (the model of learner: jax is a PPO of its own class).
+ALGO_NAMES = {"ppo": "PPO", "sac": "SAC", "crossq": "CrossQ"}
+
 
 @dataclass
 class TrainResult:
@@ -295,7 +298,7 @@ def _train(
     # Rounding up by a rollout is worth a word where it is no small part of the run.
     if total - max(config.timesteps, done_steps) > config.timesteps // 10:
         print(
-            f"training to {total:,} steps, not {config.timesteps:,}: {type(model).__name__} "
+            f"training to {total:,} steps, not {config.timesteps:,}: {ALGO_NAMES[config.algo]} "
             f"collects {rollout_steps(model):,} steps at a time"
         )
     if progress_bar:
