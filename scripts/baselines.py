@@ -48,6 +48,7 @@ FIELDS = (
     "eval_seed",
     "eval_episodes",
     "machine",
+    "learner",
 )
 HERE = Path(__file__).resolve().parent.parent
 
@@ -57,11 +58,20 @@ class Task:
     env_id: str
     recipe: str
     budgets: tuple[int, ...]
+    # Options given beside the recipe (foosball train's, e.g. --learner torch).
+    options: tuple[str, ...] = ()
 
 
 TASKS = {
     "block": Task(
         "Foosball-Block-v0", "builtin:block-scratch", (100_000, 200_000, 300_000, 500_000)
+    ),
+    # The Block recipe as its rows were first measured, with SB3's PyTorch update.
+    "block-torch": Task(
+        "Foosball-Block-v0",
+        "builtin:block-scratch",
+        (100_000, 200_000, 300_000, 500_000),
+        ("--learner", "torch"),
     ),
     "score-resting": Task(
         "Foosball-Score-v0",
@@ -97,8 +107,8 @@ def run_dir(runs: Path, task: str, seed: int) -> Path:
 
 
 def train_command(task: Task, seed: int, out: Path) -> list[str]:
-    return ["foosball", "train", task.env_id, "--config", task.recipe, "--seed", str(seed),
-            "--out", str(out)]  # fmt: skip
+    return ["foosball", "train", task.env_id, "--config", task.recipe, *task.options,
+            "--seed", str(seed), "--out", str(out)]  # fmt: skip
 
 
 def budget_model(run: Path, steps: int) -> Path:
@@ -180,6 +190,8 @@ def evaluate_budget(
         "eval_seed": EVAL_SEED,
         "eval_episodes": episodes,
         "machine": machine(),
+        # Runs from before the field existed updated with PyTorch.
+        "learner": config.get("learner", "torch"),
     }
     print(f"  {name} seed {seed}, {steps:,} steps: {100 * row['success']:.1f} %", flush=True)
     return row

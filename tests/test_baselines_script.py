@@ -61,6 +61,7 @@ def test_train_writes_a_row_per_seed_and_budget_that_its_commands_reproduce(
         assert row["eval_seed"] == str(baselines.EVAL_SEED)
         assert row["eval_episodes"] == "3"
         assert row["algorithm"] == "ppo" and json.loads(row["options"]) == {}
+        assert row["learner"] == "jax"  # PPO's default update
         assert 0 <= float(row["success"]) <= 1
         assert float(row["wall_seconds"]) > 0
     # The budget's model is the checkpoint there; the last budget is the run's own end.
@@ -92,3 +93,10 @@ def test_every_task_names_a_recipe_that_loads_for_its_environment(baselines):
 
     for name, task in baselines.TASKS.items():
         assert load_train_config(task.recipe).env_id == task.env_id, name
+
+
+def test_a_task_s_options_go_into_its_command(baselines, tmp_path: Path) -> None:
+    task = baselines.TASKS["block-torch"]
+    command = baselines.train_command(task, 2, tmp_path)
+    assert command[:5] == ["foosball", "train", "Foosball-Block-v0", "--config", task.recipe]
+    assert command[5:7] == ["--learner", "torch"]
