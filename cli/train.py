@@ -93,7 +93,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "target_success": {"type": float},
     "video_every": {"type": positive_int, "metavar": "N"},
 }
-DEFAULT_IN_HELP = ("selfplay_threshold",)
+DEFAULT_IN_HELP = ("selfplay_threshold", "learner")
 # The boolean fields, set by switches.
 SWITCHED = ("self_play", "normalize", "normalize_reward", "selfplay_sampled")
 

@@ -110,8 +110,8 @@ class TrainConfig:
     learner: str | None = _field(
         None,
         "where the update runs: jax (SB3's PPO update, every epoch in one compiled call: "
-        "several times faster on a CPU) or torch (SB3's own); None: jax for PPO, torch for SAC "
-        "and CrossQ",
+        "several times faster on a CPU) or torch (SB3's own); default: jax for PPO, torch for "
+        "SAC and CrossQ",
     )
     target_kl: float | None = _field(None, "end an update's epochs once the policy moved this far")
     pretrain_episodes: int = _field(
