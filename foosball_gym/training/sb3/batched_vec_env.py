@@ -6,8 +6,9 @@ SB3's ``SubprocVecEnv`` gives every environment a process of its own: with 16 en
 an :class:`~foosball_gym.training.sb3.in_process_vec_env.InProcessVecEnv` of its share (SB3's
 ``DummyVecEnv``: resets, final observations, seeds and ``env_method`` behave exactly as SB3's
 own), and a step is one message
-each way per worker. Seeded alike, it gives the same observations, rewards and infos as a
-``DummyVecEnv`` of the same environments.
+each way per worker. By default the training process is the first worker: it steps its own
+share while the others step theirs. Seeded alike, it gives the same observations, rewards and
+infos as a ``DummyVecEnv`` of the same environments.
 """
 
 from __future__ import annotations
@@ -141,9 +142,9 @@ class BatchedSubprocVecEnv(VecEnv):
         workers: processes that step environments; the environments are split between them
             as evenly as they go, in order (the first worker holds the first share).
         start_method: as SB3's ``SubprocVecEnv``: forkserver where there is one, else spawn.
-        here: the main process is the first worker: it steps its share while the others step
-            theirs, so one core's worth of environments needs no messages and the workers'
-            wake-ups hide behind it.
+        here: the main process is the first worker (the default): it steps its share while
+            the others step theirs, so one core's worth of environments needs no messages and
+            the workers' wake-ups hide behind it; False gives every share a worker process.
     """
 
     def __init__(
@@ -151,7 +152,7 @@ class BatchedSubprocVecEnv(VecEnv):
         env_fns: list[Callable[[], gym.Env]],
         workers: int | None = None,
         start_method: str | None = None,
-        here: bool = False,
+        here: bool = True,
     ) -> None:
         n_envs = len(env_fns)
         if n_envs < 1:

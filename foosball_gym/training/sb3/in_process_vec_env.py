@@ -12,8 +12,8 @@ class InProcessVecEnv(DummyVecEnv):
     """SB3's ``DummyVecEnv``, without its deep copy of every step's infos.
 
     The environments return a fresh info dict of numbers each step, so copying the list is
-    enough; the deep copy cost about a third as much as stepping Block (29 µs of 16
-    environments' step, against 58 µs for the simulation).
+    enough; without the deep copy 16 Block environments step 17,200 times a second, with it
+    15,600.
     """
 
     def step_wait(self) -> Any:

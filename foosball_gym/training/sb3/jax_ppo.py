@@ -282,7 +282,6 @@ def _build_update(
             - 0.5 * jnp.log(2 * jnp.pi),
             axis=-1,
         )
-        entropy = jnp.sum(0.5 + 0.5 * jnp.log(2 * jnp.pi) + log_std) * jnp.ones_like(log_prob)
         values = mlp(params, vf, obs)[:, 0]
         if normalize_advantage and advantages.shape[0] > 1:
             advantages = (advantages - advantages.mean()) / (jnp.std(advantages, ddof=1) + 1e-8)
@@ -293,7 +292,8 @@ def _build_update(
         if clip_vf:
             values = old_values + jnp.clip(values - old_values, -clip_v, clip_v)
         value_loss = jnp.mean(jnp.square(returns - values))
-        entropy_loss = -jnp.mean(entropy)
+        # A diagonal Gaussian's entropy does not depend on the observation.
+        entropy_loss = -jnp.sum(0.5 + 0.5 * jnp.log(2 * jnp.pi) + log_std)
         loss = pg_loss + ent_coef * entropy_loss + vf_coef * value_loss
         log_ratio = log_prob - old_log_prob
         stats = {

@@ -45,7 +45,7 @@ def batched_vec_env(env_fns: list[Callable[[], Any]], **kwargs: Any) -> Any:
     without the messages."""
     if kwargs.get("workers", default_workers(len(env_fns))) == 1:
         return InProcessVecEnv(env_fns)
-    return BatchedSubprocVecEnv(env_fns, **{"here": True, **kwargs})
+    return BatchedSubprocVecEnv(env_fns, **kwargs)
 
 
 VEC_ENVS = dict(
