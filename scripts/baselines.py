@@ -81,7 +81,11 @@ TASKS = {
     "score-incoming": Task(
         "Foosball-Score-v0", "builtin:score-incoming-scratch", (500_000, 1_000_000, 2_000_000)
     ),
-    # Score with obstacles has no recipe yet: none tried passed 20 % (docs/results/baselines.md).
+    "score-obstacles": Task(
+        "Foosball-Score-v0",
+        "builtin:score-obstacles-scratch",
+        (500_000, 1_000_000, 2_000_000, 4_000_000),
+    ),
 }
 
 

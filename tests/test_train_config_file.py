@@ -94,7 +94,12 @@ SHIPPED_TASKS = [
 ]
 
 
-RECIPES = ["block-scratch", "score-incoming-scratch", "score-resting-scratch"]
+RECIPES = [
+    "block-scratch",
+    "score-incoming-scratch",
+    "score-obstacles-scratch",
+    "score-resting-scratch",
+]
 
 
 def test_the_shipped_files_are_one_per_shipped_task_the_from_scratch_recipes_and_the_papers():
