@@ -508,6 +508,31 @@ def test_a_killed_camera_process_stops_the_table_with_one_error_and_no_traceback
         assert state == OFF
 
 
+class _ReapedElsewhere:
+    """A killed process whose wait another thread won: its exit code shows a moment later."""
+
+    def __init__(self, code: int, unseen_reads: int) -> None:
+        self.code, self.unseen = code, unseen_reads
+
+    def join(self, timeout: float | None = None) -> None:
+        pass
+
+    @property
+    def exitcode(self) -> int | None:
+        self.unseen -= 1
+        return None if self.unseen >= 0 else self.code
+
+
+def test_a_camera_process_reaped_by_another_thread_is_still_told_killed():
+    from foosball_gym.real_table.virtual.camera_process import CameraProcess
+
+    camera = CameraProcess.__new__(CameraProcess)  # no process started: only its end is asked
+    camera._process = _ReapedElsewhere(-signal.SIGKILL, unseen_reads=3)
+    assert "was killed by SIGKILL" in str(camera._gone())
+    camera._process = _ReapedElsewhere(0, unseen_reads=10**9)  # never ends
+    assert "is still there but its pipe is closed" in str(camera._gone())
+
+
 # ---------------------------------------------------------------------------- a hung master
 
 

@@ -24,6 +24,8 @@ import numpy as np
 
 # Long enough for a spawned interpreter to import pybullet and load the table.
 START_TIMEOUT_S = 60.0
+# How long a closed pipe waits for the process's exit code before calling it still there.
+GONE_WAIT_S = 1.0
 
 
 def _serve(conn: Connection, rods: tuple[str, ...], width: int, height: int) -> None:
@@ -212,8 +214,15 @@ class CameraProcess:
             raise self._gone() from None
 
     def _gone(self) -> CameraGone:
-        self._process.join(timeout=1)
-        code = self._process.exitcode
+        # The table's clock thread and the loop can both meet the closed pipe and wait for the
+        # process at once; the one whose wait the kernel does not answer sees no exit code until
+        # the other has stored it, a moment later (a killed process was once reported as still
+        # there).
+        deadline = time.monotonic() + GONE_WAIT_S
+        code = None
+        while code is None and time.monotonic() < deadline:
+            self._process.join(timeout=0.01)
+            code = self._process.exitcode
         how = (
             "is still there but its pipe is closed"
             if code is None
