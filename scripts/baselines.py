@@ -81,6 +81,14 @@ TASKS = {
     "score-incoming": Task(
         "Foosball-Score-v0", "builtin:score-incoming-scratch", (500_000, 1_000_000, 2_000_000)
     ),
+    # The incoming recipe as its rows were first measured: joint velocities observed, SB3's
+    # PyTorch update.
+    "score-incoming-velocities": Task(
+        "Foosball-Score-v0",
+        "builtin:score-incoming-scratch",
+        (500_000, 1_000_000, 2_000_000),
+        ("--env-kwarg", "joint_velocities=True", "--learner", "torch"),
+    ),
     "score-obstacles": Task(
         "Foosball-Score-v0",
         "builtin:score-obstacles-scratch",
