@@ -523,12 +523,13 @@ class _ReapedElsewhere:
         return None if self.unseen >= 0 else self.code
 
 
-def test_a_camera_process_reaped_by_another_thread_is_still_told_killed():
-    from foosball_gym.real_table.virtual.camera_process import CameraProcess
+def test_a_camera_process_reaped_by_another_thread_is_still_told_killed(monkeypatch):
+    from foosball_gym.real_table.virtual import camera_process
 
-    camera = CameraProcess.__new__(CameraProcess)  # no process started: only its end is asked
+    camera = camera_process.CameraProcess.__new__(camera_process.CameraProcess)  # no process
     camera._process = _ReapedElsewhere(-signal.SIGKILL, unseen_reads=3)
     assert "was killed by SIGKILL" in str(camera._gone())
+    monkeypatch.setattr(camera_process, "GONE_WAIT_S", 0.05)  # the fake's join does not wait
     camera._process = _ReapedElsewhere(0, unseen_reads=10**9)  # never ends
     assert "is still there but its pipe is closed" in str(camera._gone())
 
