@@ -78,6 +78,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "target_kl": {"type": float},
     "log_std_init": {"type": float},
     "ent_coef": {"type": float},
+    "sde_sample_freq": {"type": int, "metavar": "N"},
     "eval_freq": {"type": positive_int},
     "eval_episodes": {"type": positive_int},
     "checkpoint_freq": {"type": positive_int},
@@ -95,7 +96,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
 }
 DEFAULT_IN_HELP = ("selfplay_threshold", "learner")
 # The boolean fields, set by switches.
-SWITCHED = ("self_play", "normalize", "normalize_reward", "selfplay_sampled")
+SWITCHED = ("self_play", "normalize", "normalize_reward", "selfplay_sampled", "use_sde")
 
 
 def add_parser(subparsers: Any) -> None:
@@ -171,6 +172,20 @@ def add_parser(subparsers: Any) -> None:
         action="store_false",
         help="train on the rewards as the environment gives them",
     )
+    sde = p.add_mutually_exclusive_group()
+    sde.add_argument(
+        "--use-sde",
+        dest="use_sde",
+        action="store_true",
+        default=None,
+        help=fields_by_name["use_sde"].metadata["help"] + " (off)",
+    )
+    sde.add_argument(
+        "--no-use-sde",
+        dest="use_sde",
+        action="store_false",
+        help="explore with a Gaussian independent of the state (where a settings file has use_sde)",
+    )
     p.add_argument(
         "--selfplay-sampled",
         action="store_true",
@@ -215,6 +230,7 @@ _SWITCH_SPELLING = {
     "normalize": "--no-normalize",
     "normalize_reward": "--normalize-reward/--no-normalize-reward",
     "selfplay_sampled": "--selfplay-sampled",
+    "use_sde": "--use-sde/--no-use-sde",
 }
 
 

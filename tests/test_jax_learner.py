@@ -43,12 +43,15 @@ def adam_state(model) -> dict[int, dict[str, th.Tensor]]:
 
 
 @pytest.mark.parametrize(
-    ("target_kl", "clip_range_vf"),
-    [(None, None), (0.002, 0.5)],  # the recipes'; SB3's early stop and clipped value loss
+    ("target_kl", "clip_range_vf", "use_sde"),
+    # The recipes'; SB3's early stop and clipped value loss; gSDE's state-dependent spread.
+    [(None, None, False), (0.002, 0.5, False), (None, None, True)],
 )
-def test_the_jax_update_takes_sb3_s_steps(target_kl, clip_range_vf):
+def test_the_jax_update_takes_sb3_s_steps(target_kl, clip_range_vf, use_sde):
     venv = make_vec_env("Foosball-Block-v0", n_envs=2, seed=1)
     settings = {**SETTINGS, "target_kl": target_kl, "clip_range_vf": clip_range_vf}
+    if use_sde:
+        settings.update(use_sde=True, sde_sample_freq=4)
     sb3, jax_ppo = PPO("MlpPolicy", venv, **settings), JaxPPO("MlpPolicy", venv, **settings)
     stopped_early = False
     for rollout in range(2):
@@ -84,7 +87,12 @@ def test_the_jax_update_takes_sb3_s_steps(target_kl, clip_range_vf):
         assert jax_ppo._n_updates == sb3._n_updates
         # 4 epochs of 2 minibatches, unless the KL limit stopped it.
         stopped_early |= theirs[0]["step"].item() - steps_before < 8
-        for key in ("train/policy_gradient_loss", "train/value_loss", "train/approx_kl"):
+        for key in (
+            "train/policy_gradient_loss",
+            "train/value_loss",
+            "train/approx_kl",
+            "train/entropy_loss",
+        ):
             assert jax_log[key] == pytest.approx(sb3_log[key], rel=1e-3, abs=1e-7), key
     # The limit is small enough that SB3 stopped early: the comparison covered it.
     assert stopped_early == (target_kl is not None)

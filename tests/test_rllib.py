@@ -152,6 +152,7 @@ def test_opponent_is_replaced_by_the_rule_both_backends_share(tmp_path):
         ({"selfplay_sampled": True}, "act on their policy's mean"),
         ({"teacher_steps": 1000}, "no scripted teacher"),
         ({"selfplay_gate": 40}, "no gate"),
+        ({"use_sde": True}, "explores with a Gaussian of its own"),
         ({"env_kwargs": {"residual": 0.5}}, "bare corrections"),
     ],
 )

@@ -98,6 +98,15 @@ class TrainConfig:
     # e^-1 of the half range: SB3's 0 explores so widely that Block's keeper never settles.
     log_std_init: float = _field(-1.0, "PPO's initial log standard deviation of actions")
     ent_coef: float = _field(0.0, "PPO's weight of the policy's entropy in its loss")
+    use_sde: bool = _field(
+        False,
+        "generalised state-dependent exploration (gSDE, PPO and SAC): the actions' noise a "
+        "random linear function of the policy's last hidden layer, drawn anew every "
+        "sde_sample_freq steps, its log standard deviation starting at log_std_init",
+    )
+    sde_sample_freq: int = _field(
+        -1, "with use_sde, draw new exploration noise every this many steps (-1: once a rollout)"
+    )
     adam_eps: float | None = _field(
         1e-8, "Adam's epsilon (None: SB3's own, 1e-5 for PPO; PyTorch's default is 1e-8)"
     )
@@ -282,6 +291,24 @@ class TrainConfig:
             )
         if not math.isfinite(self.log_std_init):
             raise ValueError(f"log_std_init must be a finite number, got {self.log_std_init}")
+        if not isinstance(self.use_sde, bool):
+            raise ValueError(f"use_sde must be true or false, got {self.use_sde!r}")
+        if self.use_sde and self.algo not in ("ppo", "sac"):
+            raise ValueError(f"use_sde needs PPO or SAC, not {self.algo}; leave it off")
+        if (
+            isinstance(self.sde_sample_freq, bool)
+            or not isinstance(self.sde_sample_freq, int)
+            or not (self.sde_sample_freq == -1 or self.sde_sample_freq >= 1)
+        ):
+            raise ValueError(
+                "sde_sample_freq must be -1 (new noise once a rollout) or a whole number of "
+                f"steps, at least 1, got {self.sde_sample_freq!r}"
+            )
+        if self.sde_sample_freq != -1 and not self.use_sde:
+            raise ValueError(
+                f"sde_sample_freq {self.sde_sample_freq} says how often gSDE draws its noise; "
+                "it needs use_sde"
+            )
         if self.selfplay_threshold is None:
             self.selfplay_threshold = default_threshold(self.selfplay_rule)
         check_rule(self.selfplay_rule, self.selfplay_threshold)

@@ -43,8 +43,9 @@ def _constant(_: float) -> float:
 def policy_from_state_dict(state: Mapping[str, Any]) -> Any:
     """The SB3 ``MlpPolicy`` (PPO's or SAC's) these weights belong to, holding them.
 
-    Its layer sizes and its observation and action sizes are read off the weights; the
-    activations are SB3's defaults, which is what
+    Its layer sizes, its observation and action sizes and whether it explores by gSDE (a
+    matrix of log standard deviations) are read off the weights; the activations are SB3's
+    defaults, which is what
     :func:`~foosball_gym.training.sb3.model.build_model` uses. Actions are in [-1, 1], as in
     every environment of this package.
 
@@ -60,7 +61,7 @@ def policy_from_state_dict(state: Mapping[str, Any]) -> Any:
         act_size = state["action_net.weight"].shape[0]
         net_arch = {"pi": [w.shape[0] for w in pi], "vf": [w.shape[0] for w in vf]}
         cls: type[ActorCriticPolicy | SACPolicy] = ActorCriticPolicy
-        extra: dict[str, Any] = {}
+        extra: dict[str, Any] = {"use_sde": state["log_std"].ndim == 2}
     elif "actor.mu.weight" in state:
         from stable_baselines3.sac.policies import SACPolicy
 
@@ -70,7 +71,9 @@ def policy_from_state_dict(state: Mapping[str, Any]) -> Any:
         act_size = state["actor.mu.weight"].shape[0]
         net_arch = {"pi": [w.shape[0] for w in pi], "qf": [w.shape[0] for w in qf[:-1]]}
         critics = {k.split(".")[1] for k in state if k.startswith("critic.qf")}
-        cls, extra = SACPolicy, {"n_critics": len(critics)}
+        # SAC's gSDE actor holds its log standard deviations as a matrix, not a layer.
+        extra = {"n_critics": len(critics), "use_sde": "actor.log_std" in state}
+        cls = SACPolicy
     else:
         raise ValueError("the weights are of neither a PPO nor a SAC MlpPolicy")
     policy = cls(

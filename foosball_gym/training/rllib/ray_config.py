@@ -39,6 +39,11 @@ def check_rllib_config(config: TrainConfig, num_workers: int) -> None:
             "the rllib backend's snapshots would play their bare corrections as the opponent; "
             "train a residual policy (the environment option residual) with --backend sb3"
         )
+    if config.use_sde:
+        raise ValueError(
+            "the rllib backend explores with a Gaussian of its own; leave use_sde off, or train "
+            "with --backend sb3"
+        )
     if config.selfplay_sampled:
         raise ValueError(
             "the rllib backend's snapshots act on their policy's mean; leave selfplay_sampled "

@@ -79,9 +79,15 @@ class JaxPPO(PPO):
             raise ValueError(
                 f"learner: jax needs a flat Box observation space, not {self.observation_space}"
             )
-        if self.use_sde:
-            raise ValueError("learner: jax does not take gSDE (use_sde)")
         policy = self.policy
+        sde = policy.dist_kwargs or {}
+        if self.use_sde and (
+            sde.get("use_expln") or not sde.get("full_std", True) or sde.get("squash_output")
+        ):
+            raise ValueError(
+                "learner: jax takes gSDE with SB3's defaults (full_std, no expln, no squashing), "
+                f"not {sde}"
+            )
         self._jax_pi = _layers(policy.mlp_extractor.policy_net, "mlp_extractor.policy_net.")
         self._jax_pi.append(("action_net.weight", "action_net.bias", "none"))
         self._jax_vf = _layers(policy.mlp_extractor.value_net, "mlp_extractor.value_net.")
@@ -116,6 +122,7 @@ class JaxPPO(PPO):
                 normalize_advantage=self.normalize_advantage,
                 clip_vf=clip_vf,
                 early_stop=self.target_kl is not None,
+                sde=self.use_sde,
             )
             self._jax_update_key = key
         return self._jax_update
@@ -259,8 +266,14 @@ def _build_update(
     normalize_advantage: bool,
     clip_vf: bool,
     early_stop: bool,
+    sde: bool = False,
 ) -> Any:
-    """The jitted update: every epoch's minibatches, in order, in one call."""
+    """The jitted update: every epoch's minibatches, in order, in one call.
+
+    With ``sde``, the actions' distribution is gSDE's as SB3 builds it: a Gaussian about the
+    mean whose variance is the squared last hidden layer (held fixed: SB3 detaches it) times
+    the squared standard deviations of the noise matrix, plus 1e-6.
+    """
     import jax
     import jax.numpy as jnp
 
@@ -274,8 +287,13 @@ def _build_update(
     def losses(params: dict[str, Any], batch: tuple[Any, ...], hyper: Any) -> tuple[Any, Any]:
         obs, actions, old_log_prob, advantages, returns, old_values = batch
         clip, clip_v, ent_coef, vf_coef = hyper[1], hyper[2], hyper[3], hyper[4]
-        mean = mlp(params, pi, obs)
+        latent = mlp(params, pi[:-1], obs)
+        weight, bias, _ = pi[-1]
+        mean = latent @ params[weight].T + params[bias]
         log_std = params["log_std"]
+        if sde:
+            variance = jnp.square(jax.lax.stop_gradient(latent)) @ jnp.exp(2 * log_std)
+            log_std = 0.5 * jnp.log(variance + 1e-6)
         log_prob = jnp.sum(
             -0.5 * jnp.square((actions - mean) / jnp.exp(log_std))
             - log_std
@@ -292,8 +310,9 @@ def _build_update(
         if clip_vf:
             values = old_values + jnp.clip(values - old_values, -clip_v, clip_v)
         value_loss = jnp.mean(jnp.square(returns - values))
-        # A diagonal Gaussian's entropy does not depend on the observation.
-        entropy_loss = -jnp.sum(0.5 + 0.5 * jnp.log(2 * jnp.pi) + log_std)
+        # A diagonal Gaussian's entropy depends on the observation only through gSDE's spread.
+        entropy = jnp.sum(0.5 + 0.5 * jnp.log(2 * jnp.pi) + log_std, axis=-1)
+        entropy_loss = -jnp.mean(entropy)
         loss = pg_loss + ent_coef * entropy_loss + vf_coef * value_loss
         log_ratio = log_prob - old_log_prob
         stats = {

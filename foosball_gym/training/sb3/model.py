@@ -49,6 +49,8 @@ def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
         "verbose": 0,
         "tensorboard_log": None if tb_dir is None else str(tb_dir),
     }
+    if config.use_sde:
+        common.update(use_sde=True, sde_sample_freq=config.sde_sample_freq)
     if config.algo == "ppo":
         policy_kwargs["log_std_init"] = config.log_std_init
         ppo = PPO
