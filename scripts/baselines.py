@@ -62,8 +62,6 @@ class Task:
     options: tuple[str, ...] = ()
 
 
-# Gaussian exploration in place of a recipe's gSDE, from the initial spread the recipes had.
-GAUSSIAN = ("--no-use-sde", "--sde-sample-freq", "-1", "--log-std-init", "-1")
 TASKS = {
     "block": Task(
         "Foosball-Block-v0", "builtin:block-scratch", (100_000, 200_000, 300_000, 500_000)
@@ -84,19 +82,19 @@ TASKS = {
         "Foosball-Score-v0", "builtin:score-incoming-scratch", (500_000, 1_000_000, 2_000_000)
     ),
     # The incoming recipe as its rows were first measured: joint velocities observed, SB3's
-    # PyTorch update, Gaussian exploration.
+    # PyTorch update.
     "score-incoming-velocities": Task(
         "Foosball-Score-v0",
         "builtin:score-incoming-scratch",
         (500_000, 1_000_000, 2_000_000),
-        ("--env-kwarg", "joint_velocities=True", "--learner", "torch", *GAUSSIAN),
+        ("--env-kwarg", "joint_velocities=True", "--learner", "torch"),
     ),
-    # Its second rows: no joint velocities, JAX's update, Gaussian exploration.
-    "score-incoming-gaussian": Task(
+    # The incoming recipe exploring by gSDE (its development run 10).
+    "score-incoming-gsde": Task(
         "Foosball-Score-v0",
         "builtin:score-incoming-scratch",
         (500_000, 1_000_000, 2_000_000),
-        GAUSSIAN,
+        ("--use-sde", "--sde-sample-freq", "4", "--log-std-init", "-2"),
     ),
     "score-obstacles": Task(
         "Foosball-Score-v0",
