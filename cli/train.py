@@ -137,19 +137,11 @@ def add_parser(subparsers: Any) -> None:
         # A default that depends on other options is told in the field's own help.
         shown = "" if name in DEFAULT_IN_HELP else f" ({_shown(f.default)})"
         p.add_argument(f"--{name.replace('_', '-')}", help=doc + shown, **spelling)
-    sp = p.add_mutually_exclusive_group()
-    sp.add_argument(
-        "--self-play",
-        dest="self_play",
-        action="store_true",
-        default=None,
-        help="play frozen copies of the learner (default for two-player tasks)",
-    )
-    sp.add_argument(
-        "--no-self-play",
-        dest="self_play",
-        action="store_false",
-        help="play the environment's scripted opponent instead",
+    _on_off(
+        p,
+        "self_play",
+        "play frozen copies of the learner (default for two-player tasks)",
+        "play the environment's scripted opponent instead",
     )
     p.add_argument(
         "--no-normalize",
@@ -158,33 +150,17 @@ def add_parser(subparsers: Any) -> None:
         default=None,
         help="do not normalise observations",
     )
-    reward = p.add_mutually_exclusive_group()
-    reward.add_argument(
-        "--normalize-reward",
-        dest="normalize_reward",
-        action="store_true",
-        default=None,
-        help=fields_by_name["normalize_reward"].metadata["help"] + " (the default)",
+    _on_off(
+        p,
+        "normalize_reward",
+        fields_by_name["normalize_reward"].metadata["help"] + " (the default)",
+        "train on the rewards as the environment gives them",
     )
-    reward.add_argument(
-        "--no-normalize-reward",
-        dest="normalize_reward",
-        action="store_false",
-        help="train on the rewards as the environment gives them",
-    )
-    sde = p.add_mutually_exclusive_group()
-    sde.add_argument(
-        "--use-sde",
-        dest="use_sde",
-        action="store_true",
-        default=None,
-        help=fields_by_name["use_sde"].metadata["help"] + " (off)",
-    )
-    sde.add_argument(
-        "--no-use-sde",
-        dest="use_sde",
-        action="store_false",
-        help="explore with a Gaussian independent of the state (where a settings file has use_sde)",
+    _on_off(
+        p,
+        "use_sde",
+        fields_by_name["use_sde"].metadata["help"] + " (off)",
+        "explore with a Gaussian independent of the state (where a settings file has use_sde)",
     )
     p.add_argument(
         "--selfplay-sampled",
@@ -195,6 +171,14 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_rllib_arguments(p)
     p.set_defaults(func=run)
+
+
+def _on_off(p: argparse.ArgumentParser, name: str, on_help: str, off_help: str) -> None:
+    """--NAME and --no-NAME for a boolean field, unset (None) unless one is given."""
+    flag = name.replace("_", "-")
+    pair = p.add_mutually_exclusive_group()
+    pair.add_argument(f"--{flag}", dest=name, action="store_true", default=None, help=on_help)
+    pair.add_argument(f"--no-{flag}", dest=name, action="store_false", help=off_help)
 
 
 def _shown(default: Any) -> str:

@@ -191,3 +191,9 @@ def test_the_jax_learner_is_refused_where_it_cannot_run(monkeypatch):
     )
     with pytest.raises(ValueError, match=r"learner jax needs JAX, which is not installed"):
         TrainConfig("Foosball-Block-v0", learner="jax").check()
+
+
+def test_the_jax_learner_refuses_a_gsde_it_does_not_compute():
+    venv = make_vec_env("Foosball-Block-v0", n_envs=1, seed=1)
+    with pytest.raises(ValueError, match="gSDE with SB3's defaults"):
+        JaxPPO("MlpPolicy", venv, use_sde=True, policy_kwargs={"use_expln": True}, device="cpu")

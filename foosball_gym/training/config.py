@@ -291,8 +291,6 @@ class TrainConfig:
             )
         if not math.isfinite(self.log_std_init):
             raise ValueError(f"log_std_init must be a finite number, got {self.log_std_init}")
-        if not isinstance(self.use_sde, bool):
-            raise ValueError(f"use_sde must be true or false, got {self.use_sde!r}")
         if self.use_sde and self.algo not in ("ppo", "sac"):
             raise ValueError(f"use_sde needs PPO or SAC, not {self.algo}; leave it off")
         if (

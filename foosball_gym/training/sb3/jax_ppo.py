@@ -80,13 +80,13 @@ class JaxPPO(PPO):
                 f"learner: jax needs a flat Box observation space, not {self.observation_space}"
             )
         policy = self.policy
-        sde = policy.dist_kwargs or {}
+        dist = policy.dist_kwargs or {}
         if self.use_sde and (
-            sde.get("use_expln") or not sde.get("full_std", True) or sde.get("squash_output")
+            dist.get("use_expln") or not dist.get("full_std", True) or dist.get("squash_output")
         ):
             raise ValueError(
                 "learner: jax takes gSDE with SB3's defaults (full_std, no expln, no squashing), "
-                f"not {sde}"
+                f"not {dist}"
             )
         self._jax_pi = _layers(policy.mlp_extractor.policy_net, "mlp_extractor.policy_net.")
         self._jax_pi.append(("action_net.weight", "action_net.bias", "none"))
