@@ -96,7 +96,14 @@ OPTIONS: dict[str, dict[str, Any]] = {
 }
 DEFAULT_IN_HELP = ("selfplay_threshold", "learner")
 # The boolean fields, set by switches.
-SWITCHED = ("self_play", "normalize", "normalize_reward", "selfplay_sampled", "use_sde")
+SWITCHED = (
+    "self_play",
+    "normalize",
+    "normalize_reward",
+    "selfplay_sampled",
+    "use_sde",
+    "worker_rollouts",
+)
 
 
 def add_parser(subparsers: Any) -> None:
@@ -162,6 +169,12 @@ def add_parser(subparsers: Any) -> None:
         fields_by_name["use_sde"].metadata["help"] + " (off)",
         "explore with a Gaussian independent of the state (where a settings file has use_sde)",
     )
+    _on_off(
+        p,
+        "worker_rollouts",
+        fields_by_name["worker_rollouts"].metadata["help"] + " (off)",
+        "run the policy in the training process once a step, as SB3 does",
+    )
     p.add_argument(
         "--selfplay-sampled",
         action="store_true",
@@ -215,6 +228,7 @@ _SWITCH_SPELLING = {
     "normalize_reward": "--normalize-reward/--no-normalize-reward",
     "selfplay_sampled": "--selfplay-sampled",
     "use_sde": "--use-sde/--no-use-sde",
+    "worker_rollouts": "--worker-rollouts/--no-worker-rollouts",
 }
 
 

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any, cast
 import gymnasium as gym
 
 from foosball_gym.registration import ENV_IDS, check_env_id, check_env_options
+from foosball_gym.training.config_kinds import KINDS_SPELLED, of_kind
 from foosball_gym.training.curriculum import check_curriculum
 from foosball_gym.training.run_dir.files import atomic_write_text, read_json
 from foosball_gym.training.run_dir.physics import physics_record
@@ -49,6 +50,7 @@ LEGACY_DEFAULTS: dict[str, Any] = {
     "selfplay_stall_games": 0,
     "learner": "torch",
     "vec_env": "dummy",
+    "worker_rollouts": False,
 }
 
 
@@ -106,6 +108,12 @@ class TrainConfig:
     )
     sde_sample_freq: int = _field(
         -1, "with use_sde, draw new exploration noise every this many steps (-1: once a rollout)"
+    )
+    worker_rollouts: bool | None = _field(
+        None,
+        "PPO: each process that steps environments plays its share's whole rollout with a "
+        "copy of the policy, one message a rollout instead of one a step (None: on where it "
+        "can, PPO without gSDE or self-play, vec_env batched or dummy)",
     )
     adam_eps: float | None = _field(
         1e-8, "Adam's epsilon (None: SB3's own, 1e-5 for PPO; PyTorch's default is 1e-8)"
@@ -382,12 +390,45 @@ class TrainConfig:
                 f"selfplay_gate judges self-play's replacements; {self.env_id} trains without "
                 "self-play here"
             )
+        self._check_worker_rollouts()
         if self.self_play:
             # The paper's self-play task has no early draw for a still ball (docs/self-play.md);
             # written into env_kwargs so that the run's evaluations play the game it trained on.
             # In a continuous match a still ball is served again, not drawn: that rule stays.
             if not self.env_kwargs.get("continuous"):
                 self.env_kwargs.setdefault("stagnation_steps", 0)
+
+    def _check_worker_rollouts(self) -> None:
+        """Resolve worker_rollouts' default; refuse it where it was asked for and cannot play."""
+        if self.worker_rollouts is None:
+            self.worker_rollouts = (
+                self.algo == "ppo"
+                and not self.use_sde
+                and not self.self_play
+                and self.vec_env != "subproc"
+            )
+        if not self.worker_rollouts:
+            return
+        if self.self_play:
+            raise ValueError(
+                "worker_rollouts plays the learner alone in each worker; self-play chooses its "
+                "opponents' actions in the training process: leave worker_rollouts off"
+            )
+        if self.algo != "ppo":
+            raise ValueError(
+                f"worker_rollouts plays PPO's rollouts; {self.algo} learns from a replay buffer "
+                "step by step: leave it off"
+            )
+        if self.use_sde:
+            raise ValueError(
+                "worker_rollouts plays a Gaussian independent of the state; use_sde's noise is "
+                "drawn in the training process: leave one of them off"
+            )
+        if self.vec_env == "subproc":
+            raise ValueError(
+                "worker_rollouts needs vec_env batched or dummy, whose processes can play a "
+                "share of the environments, not subproc"
+            )
 
     def _check_levels(self, scripted_level: Callable[[int], object]) -> None:
         """Check selfplay_scripted_levels against ``scripted_level``, which makes the
@@ -436,9 +477,9 @@ class TrainConfig:
         if "env_id" not in data:
             raise ValueError(f"{path} is damaged: it names no env_id")
         for f in fields(cls):
-            if f.name in data and not _of_kind(data[f.name], str(f.type)):
+            if f.name in data and not of_kind(data[f.name], str(f.type)):
                 raise ValueError(
-                    f"{path} is damaged: {f.name} must be {_KINDS_SPELLED[str(f.type)]}, "
+                    f"{path} is damaged: {f.name} must be {KINDS_SPELLED[str(f.type)]}, "
                     f"got {data[f.name]!r}"
                 )
         if data.get("self_play") and "selfplay_rule" not in data:
@@ -449,40 +490,6 @@ class TrainConfig:
         config.net_arch = tuple(config.net_arch)
         config.selfplay_scripted_levels = tuple(config.selfplay_scripted_levels)
         return config
-
-
-# How config.json spells each kind of field (by its annotation), and what it must hold.
-_KINDS_SPELLED = {
-    "str": "a string",
-    "int": "a whole number",
-    "int | None": "a whole number or null",
-    "float": "a number",
-    "float | None": "a number or null",
-    "bool": "true or false",
-    "bool | None": "true, false or null",
-    "tuple[int, ...]": "a list of whole numbers",
-    "dict[str, Any]": "an object",
-}
-
-
-def _of_kind(value: Any, kind: str) -> bool:
-    def whole(v: Any) -> bool:
-        return isinstance(v, int) and not isinstance(v, bool)
-
-    if kind.endswith(" | None") and value is None:
-        return True
-    kind = kind.removesuffix(" | None")
-    if kind == "int":
-        return whole(value)
-    if kind == "float":
-        return whole(value) or isinstance(value, float)
-    if kind == "bool":
-        return isinstance(value, bool)
-    if kind == "str":
-        return isinstance(value, str)
-    if kind == "tuple[int, ...]":
-        return isinstance(value, list) and all(whole(v) for v in value)
-    return isinstance(value, dict)
 
 
 def stall_fallback(config: TrainConfig) -> str | None:

@@ -30,6 +30,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 )
 
 from foosball_gym.training.sb3.in_process_vec_env import InProcessVecEnv
+from foosball_gym.training.sb3.worker_rollouts import RolloutPart, RolloutPlan, play_rollout
 
 
 class _Failure:
@@ -51,6 +52,8 @@ def _handle(envs: InProcessVecEnv, cmd: str, data: Any) -> Any:
     if cmd == "step":
         envs.step_async(data)
         return (*envs.step_wait(), envs.reset_infos)
+    if cmd == "rollout":
+        return play_rollout(envs, data)
     if cmd == "reset":
         seeds, options = data
         for i, (seed, option) in enumerate(zip(seeds, options)):
@@ -188,6 +191,20 @@ class BatchedSubprocVecEnv(VecEnv):
     @property
     def workers(self) -> int:
         return len(self.remotes)
+
+    @property
+    def shares(self) -> list[slice]:
+        """The environments each worker holds, in order."""
+        return self._slices
+
+    def play_rollouts(self, plans: list[RolloutPlan]) -> list[RolloutPart]:
+        """Each worker plays its share's rollout, all at once (one plan per share)."""
+        for remote, plan in zip(self.remotes, plans, strict=True):
+            remote.send(("rollout", plan))
+        self.waiting = True
+        parts = [_answer(remote) for remote in self.remotes]
+        self.waiting = False
+        return parts
 
     def step_async(self, actions: np.ndarray) -> None:
         for remote, share in zip(self.remotes, self._slices):

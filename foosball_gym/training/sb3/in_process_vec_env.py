@@ -7,6 +7,8 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from foosball_gym.training.sb3.worker_rollouts import RolloutPart, RolloutPlan, play_rollout
+
 
 class InProcessVecEnv(DummyVecEnv):
     """SB3's ``DummyVecEnv``, without its deep copy of every step's infos.
@@ -32,3 +34,13 @@ class InProcessVecEnv(DummyVecEnv):
             np.copy(self.buf_dones),
             list(self.buf_infos),
         )
+
+    @property
+    def shares(self) -> list[slice]:
+        """One share: every environment (as the batched vec env's workers hold theirs)."""
+        return [slice(0, self.num_envs)]
+
+    def play_rollouts(self, plans: list[RolloutPlan]) -> list[RolloutPart]:
+        """The rollout of :mod:`~foosball_gym.training.sb3.worker_rollouts`, played here."""
+        (plan,) = plans
+        return [play_rollout(self, plan)]

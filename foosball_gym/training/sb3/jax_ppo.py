@@ -22,6 +22,8 @@ from gymnasium import spaces
 from stable_baselines3 import PPO
 from stable_baselines3.common.utils import explained_variance
 
+from foosball_gym.training.sb3.mlp_layers import mlp_layers
+
 JAX_MISSING = (
     "learner: jax needs JAX; install it with pip install 'jax[cpu]' (or the train extra of "
     "foosball_gym), or train with learner: torch"
@@ -39,29 +41,6 @@ def import_jax() -> Any:
     finally:
         np.random.set_state(state)
     return jnp
-
-
-def _layers(sequential: th.nn.Module, prefix: str) -> list[tuple[str, str, str]]:
-    """(weight name, bias name, activation) for each linear layer of an SB3 MLP."""
-    modules = list(sequential.named_children())
-    layers = []
-    for i, (name, module) in enumerate(modules):
-        if isinstance(module, th.nn.Linear):
-            after = modules[i + 1][1] if i + 1 < len(modules) else None
-            if isinstance(after, th.nn.Tanh):
-                act = "tanh"
-            elif isinstance(after, th.nn.ReLU):
-                act = "relu"
-            elif after is None:
-                act = "none"
-            else:
-                raise ValueError(
-                    f"learner: jax knows tanh and ReLU layers, not {type(after).__name__}"
-                )
-            layers.append((f"{prefix}{name}.weight", f"{prefix}{name}.bias", act))
-        elif not isinstance(module, th.nn.Tanh | th.nn.ReLU):
-            raise ValueError(f"learner: jax knows linear layers, not {type(module).__name__}")
-    return layers
 
 
 class JaxPPO(PPO):
@@ -88,9 +67,9 @@ class JaxPPO(PPO):
                 "learner: jax takes gSDE with SB3's defaults (full_std, no expln, no squashing), "
                 f"not {dist}"
             )
-        self._jax_pi = _layers(policy.mlp_extractor.policy_net, "mlp_extractor.policy_net.")
+        self._jax_pi = mlp_layers(policy.mlp_extractor.policy_net, "mlp_extractor.policy_net.")
         self._jax_pi.append(("action_net.weight", "action_net.bias", "none"))
-        self._jax_vf = _layers(policy.mlp_extractor.value_net, "mlp_extractor.value_net.")
+        self._jax_vf = mlp_layers(policy.mlp_extractor.value_net, "mlp_extractor.value_net.")
         self._jax_vf.append(("value_net.weight", "value_net.bias", "none"))
         names = [n for n, _ in policy.named_parameters()]
         used = {n for layer in self._jax_pi + self._jax_vf for n in layer[:2]} | {"log_std"}

@@ -26,6 +26,8 @@ from foosball_gym.training.run_dir.storage import (
     statistics_beside,
     zip_statistics,
 )
+from foosball_gym.training.sb3.jax_ppo import JaxPPO
+from foosball_gym.training.sb3.worker_rollouts import WorkerRollouts
 
 
 def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
@@ -53,12 +55,7 @@ def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
         common.update(use_sde=True, sde_sample_freq=config.sde_sample_freq)
     if config.algo == "ppo":
         policy_kwargs["log_std_init"] = config.log_std_init
-        ppo = PPO
-        if config.learner == "jax":
-            from foosball_gym.training.sb3.jax_ppo import JaxPPO
-
-            ppo = JaxPPO
-        return ppo(
+        return _ppo_class(config)(
             "MlpPolicy",
             venv,
             n_steps=config.n_steps,
@@ -80,6 +77,20 @@ def build_model(config: TrainConfig, venv: Any, tb_dir: Path | None) -> Any:
     return SAC(
         "MlpPolicy", venv, batch_size=config.batch_size, policy_kwargs=policy_kwargs, **common
     )
+
+
+def _ppo_class(config: TrainConfig) -> type[PPO]:
+    if config.worker_rollouts:
+        return RolloutJaxPPO if config.learner == "jax" else RolloutPPO
+    return JaxPPO if config.learner == "jax" else PPO
+
+
+class RolloutPPO(WorkerRollouts, PPO):
+    """SB3's PPO, its rollouts played where the environments are."""
+
+
+class RolloutJaxPPO(WorkerRollouts, JaxPPO):
+    """PPO with JAX's update, its rollouts played where the environments are."""
 
 
 def load_checkpoint(config: TrainConfig, out: Path, venv: Any) -> tuple[Any, int]:

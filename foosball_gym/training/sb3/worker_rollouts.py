@@ -1,0 +1,284 @@
+"""PPO's rollouts played where the environments are, a whole rollout per message.
+
+SB3's ``collect_rollouts`` runs the policy in the training process once a step and sends the
+actions out: with the environments split over one process per core, each step is a message
+each way per worker, and the workers wait while the policy runs. PPO holds its policy still
+for a whole rollout, so each process that steps a share of the environments (the batched vec
+env's workers and the training process's own share) can play its share to the end with a copy
+of the policy's weights, in parallel: one message each way per worker and rollout.
+
+Kept from SB3's loop: the policy itself (its weights in NumPy, float32), actions drawn from its
+Gaussian and clipped to the action space for the environments, the buffer's unclipped actions,
+values and log-probabilities, rewards of truncated episodes bootstrapped with the value of their
+last observation, VecNormalize's own code for the observations and rewards (a copy of the
+run's, in each share), its statistics updated by every observation and return of the rollout,
+and every callback called once a step, in order, with that step's infos and dones.
+
+What differs: the exploration noise is NumPy's, seeded by the run's seed, step and share, not
+PyTorch's; within a rollout each share normalises with the statistics of the rollout's start
+updated by its own observations only (after the rollout they are those of all of them); and the
+callbacks are called once the rollout is played, so one that changes the environments (a serve
+curriculum) acts from the next rollout on, and a stop asked for mid-rollout comes after the
+environments have played it.
+"""
+
+from __future__ import annotations
+
+import pickle
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.utils import obs_as_tensor
+from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+
+from foosball_gym.training.sb3.mlp_layers import mlp_layers
+
+_HALF_LOG_2PI = np.float32(0.5 * np.log(2 * np.pi))
+
+
+@dataclass
+class NumpyPolicy:
+    """An SB3 ``MlpPolicy``'s Gaussian actor and its critic, as NumPy arrays."""
+
+    pi: list[tuple[np.ndarray, np.ndarray, str]]
+    vf: list[tuple[np.ndarray, np.ndarray, str]]
+    log_std: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+    @classmethod
+    def of(cls, policy: Any, action_space: spaces.Space) -> NumpyPolicy:
+        """The arrays of ``policy`` (an SB3 ``ActorCriticPolicy``), refused where this class
+        would not compute what it does."""
+        if not isinstance(action_space, spaces.Box):
+            raise ValueError(f"worker_rollouts needs a Box action space, not {action_space}")
+        space = policy.observation_space
+        if not isinstance(space, spaces.Box) or len(space.shape) != 1:
+            raise ValueError(f"worker_rollouts needs a flat Box observation space, not {space}")
+        if policy.use_sde or policy.squash_output:
+            raise ValueError("worker_rollouts plays a plain Gaussian policy: leave use_sde off")
+        state = {name: p.detach().cpu().numpy() for name, p in policy.named_parameters()}
+        pi = mlp_layers(policy.mlp_extractor.policy_net, "mlp_extractor.policy_net.")
+        pi.append(("action_net.weight", "action_net.bias", "none"))
+        vf = mlp_layers(policy.mlp_extractor.value_net, "mlp_extractor.value_net.")
+        vf.append(("value_net.weight", "value_net.bias", "none"))
+        used = {n for layer in pi + vf for n in layer[:2]} | {"log_std"}
+        if set(state) != used:
+            raise ValueError(
+                f"worker_rollouts does not know the policy's parameters {sorted(set(state) - used)}"
+            )
+
+        def arrays(layers: list[tuple[str, str, str]]) -> list[tuple[np.ndarray, np.ndarray, str]]:
+            return [(np.ascontiguousarray(state[w].T), state[b], act) for w, b, act in layers]
+
+        return cls(
+            arrays(pi),
+            arrays(vf),
+            state["log_std"],
+            action_space.low.astype(np.float32),
+            action_space.high.astype(np.float32),
+        )
+
+    @staticmethod
+    def _forward(layers: list[tuple[np.ndarray, np.ndarray, str]], x: np.ndarray) -> np.ndarray:
+        for weight, bias, act in layers:
+            x = x @ weight + bias
+            if act == "tanh":
+                x = np.tanh(x)
+            elif act == "relu":
+                x = np.maximum(x, 0)
+        return x
+
+    def value(self, obs: np.ndarray) -> np.ndarray:
+        return self._forward(self.vf, np.asarray(obs, np.float32))[..., 0]
+
+    def act(
+        self, obs: np.ndarray, rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Sampled actions (unclipped), the values and the actions' log-probabilities."""
+        obs = np.asarray(obs, np.float32)
+        mean = self._forward(self.pi, obs)
+        noise = rng.standard_normal(mean.shape, dtype=np.float32)
+        actions = mean + np.exp(self.log_std) * noise
+        log_prob = -(0.5 * noise * noise + self.log_std + _HALF_LOG_2PI).sum(axis=-1)
+        return actions, self.value(obs), log_prob
+
+
+@dataclass
+class RolloutPlan:
+    """What a share needs to play a rollout: the policy, the steps, the discount, its part of
+    the last observations (normalised), the noise's seed, and the run's VecNormalize (pickled,
+    without its environments) with the share's running returns."""
+
+    policy: NumpyPolicy
+    n_steps: int
+    gamma: float
+    last_obs: np.ndarray
+    seed: list[int]
+    normalisation: bytes | None
+    returns: np.ndarray | None
+
+
+@dataclass
+class RolloutPart:
+    """A share's rollout, arrays with a leading step axis, and what its normaliser saw."""
+
+    observations: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    values: np.ndarray
+    log_probs: np.ndarray
+    dones: np.ndarray
+    infos: list[list[dict[str, Any]]]
+    last_obs: np.ndarray
+    raw_obs: np.ndarray  # the environments' observations, for the run's statistics
+    raw_returns: np.ndarray  # the running returns as the statistics took them
+    returns: np.ndarray | None  # the running returns at the end
+    last_raw_obs: np.ndarray
+    last_raw_reward: np.ndarray
+    reset_infos: list[dict[str, Any]]
+
+
+def play_rollout(envs: VecEnv, plan: RolloutPlan) -> RolloutPart:
+    """Play ``plan`` on ``envs`` (a share of the run's environments, unnormalised)."""
+    norm: VecNormalize | None = None
+    stepped: VecEnv = envs
+    if plan.normalisation is not None:
+        norm = pickle.loads(plan.normalisation)
+        norm.set_venv(envs)
+        norm.returns = np.array(plan.returns, dtype=np.float64)
+        stepped = norm
+    rng = np.random.default_rng(plan.seed)
+    policy, n, k = plan.policy, plan.n_steps, envs.num_envs
+    obs: Any = plan.last_obs
+    observations = np.empty((n, *obs.shape), np.float32)
+    actions = np.empty((n, k, policy.low.shape[0]), np.float32)
+    rewards = np.empty((n, k), np.float32)
+    values = np.empty((n, k), np.float32)
+    log_probs = np.empty((n, k), np.float32)
+    dones = np.empty((n, k), bool)
+    raw_obs = np.empty((n, *obs.shape), np.float64)
+    raw_returns = np.zeros((n, k), np.float64)
+    infos = []
+    for t in range(n):
+        observations[t] = obs
+        actions[t], values[t], log_probs[t] = policy.act(obs, rng)
+        before = None if norm is None else norm.returns.copy()
+        obs, reward, dones[t], info = stepped.step(np.clip(actions[t], policy.low, policy.high))
+        if norm is not None:
+            assert before is not None
+            raw_obs[t] = norm.old_obs
+            raw_returns[t] = before * norm.gamma + norm.old_reward
+        else:
+            raw_obs[t] = obs
+        for i in np.flatnonzero(dones[t]):
+            if info[i].get("terminal_observation") is not None and info[i].get(
+                "TimeLimit.truncated", False
+            ):
+                reward[i] += plan.gamma * policy.value(info[i]["terminal_observation"])
+        rewards[t] = reward
+        infos.append(info)
+    return RolloutPart(
+        observations,
+        actions,
+        rewards,
+        values,
+        log_probs,
+        dones,
+        infos,
+        np.asarray(obs),
+        raw_obs,
+        raw_returns,
+        None if norm is None else norm.returns,
+        raw_obs[-1],
+        norm.old_reward if norm is not None else rewards[-1],
+        list(getattr(envs, "reset_infos", [{}] * k)),
+    )
+
+
+class WorkerRollouts:
+    """Mixed into an SB3 PPO: :meth:`collect_rollouts` has each share of the environments play
+    the whole rollout (the module's docstring). The training env is the run's vec env (batched
+    or in this process), with or without VecNormalize around it."""
+
+    def collect_rollouts(
+        self, env: VecEnv, callback: Any, rollout_buffer: Any, n_rollout_steps: int
+    ) -> bool:
+        model: Any = self
+        norm = env if isinstance(env, VecNormalize) else None
+        inner: Any = norm.venv if norm is not None else env
+        if not hasattr(inner, "play_rollouts"):
+            raise ValueError(
+                "worker_rollouts plays the rollouts in the run's own environments (vec_env "
+                f"batched or dummy), not in a {type(inner).__name__}"
+            )
+        model.policy.set_training_mode(False)
+        rollout_buffer.reset()
+        callback.on_rollout_start()
+        policy = NumpyPolicy.of(model.policy, model.action_space)
+        shared = None
+        if norm is not None:
+            shared = pickle.dumps(norm)
+        plans = [
+            RolloutPlan(
+                policy,
+                n_rollout_steps,
+                model.gamma,
+                model._last_obs[share],
+                [model.seed or 0, model.num_timesteps, i],
+                shared,
+                None if norm is None else norm.returns[share],
+            )
+            for i, share in enumerate(inner.shares)
+        ]
+        parts: list[RolloutPart] = inner.play_rollouts(plans)
+
+        def joined(name: str, axis: int = 1) -> np.ndarray:
+            return np.concatenate([getattr(p, name) for p in parts], axis=axis)
+
+        dones = joined("dones")
+        if norm is not None:
+            _take_statistics(norm, parts, joined)
+        inner.reset_infos = [info for p in parts for info in p.reset_infos]
+        step_infos = [[info for p in parts for info in p.infos[t]] for t in range(n_rollout_steps)]
+        for t in range(n_rollout_steps):
+            model.num_timesteps += env.num_envs
+            infos, step_dones = step_infos[t], dones[t]
+            callback.update_locals({"infos": infos, "dones": step_dones, "n_steps": t})
+            if not callback.on_step():
+                return False
+            model._update_info_buffer(infos, step_dones)
+
+        rollout_buffer.observations[:] = joined("observations")
+        rollout_buffer.actions[:] = joined("actions")
+        rollout_buffer.rewards[:] = joined("rewards")
+        rollout_buffer.values[:] = joined("values")
+        rollout_buffer.log_probs[:] = joined("log_probs")
+        rollout_buffer.episode_starts[0] = model._last_episode_starts
+        rollout_buffer.episode_starts[1:] = dones[:-1]
+        rollout_buffer.pos, rollout_buffer.full = n_rollout_steps, True
+        model._last_obs = joined("last_obs", axis=0)
+        model._last_episode_starts = dones[-1]
+        with th.no_grad():
+            values = model.policy.predict_values(obs_as_tensor(model._last_obs, model.device))
+        rollout_buffer.compute_returns_and_advantage(last_values=values, dones=dones[-1])
+        callback.update_locals({"values": values, "dones": dones[-1]})
+        callback.on_rollout_end()
+        return True
+
+
+def _take_statistics(norm: VecNormalize, parts: list[RolloutPart], joined: Any) -> None:
+    """Give the run's VecNormalize what the shares' copies saw: the statistics of every
+    observation and running return of the rollout, the returns and the last step's raw
+    observation and reward."""
+    if norm.training:
+        if norm.norm_obs:
+            raw = joined("raw_obs")
+            norm.obs_rms.update(raw.reshape(-1, *raw.shape[2:]))
+        norm.ret_rms.update(joined("raw_returns").reshape(-1))
+    norm.returns = joined("returns", axis=0)
+    norm.old_obs = joined("last_raw_obs", axis=0)
+    norm.old_reward = joined("last_raw_reward", axis=0)

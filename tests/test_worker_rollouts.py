@@ -1,0 +1,165 @@
+"""worker_rollouts: each process that steps environments plays its share's whole rollout with a
+copy of the policy. The rollout it fills is SB3's own (same observations, actions, rewards,
+values, advantages and statistics where the noise is the same), the policy's copy is the policy,
+a run with it trains, resumes and loads as any other, and what it cannot play is refused."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+import torch as th  # noqa: E402
+from stable_baselines3 import PPO  # noqa: E402
+
+from foosball_gym.cli import main  # noqa: E402
+from foosball_gym.training.config import TrainConfig  # noqa: E402
+from foosball_gym.training.loading.sb3_load import sb3_objects  # noqa: E402
+from foosball_gym.training.sb3.model import RolloutPPO, build_model  # noqa: E402
+from foosball_gym.training.sb3.vec_env import make_env  # noqa: E402
+from foosball_gym.training.sb3.worker_rollouts import NumpyPolicy  # noqa: E402
+
+
+def _model(config: TrainConfig) -> tuple[object, object]:
+    config.check()
+    venv = make_env(config)
+    return build_model(config, venv, None), venv
+
+
+def _quiet(model: object) -> None:
+    """The policy's noise far below a float32 step of its mean: both loops play the mean, so
+    their rollouts can be compared whatever generator draws the noise."""
+    with th.no_grad():
+        model.policy.log_std.fill_(-30.0)
+
+
+def _collect(model: object, venv: object, steps: int) -> None:
+    from stable_baselines3.common.callbacks import CallbackList
+
+    model._setup_learn(steps, CallbackList([]))
+    callback = CallbackList([])
+    callback.init_callback(model)
+    assert model.collect_rollouts(venv, callback, model.rollout_buffer, model.n_steps)
+
+
+@pytest.mark.parametrize(
+    ("vec_env", "normalize"),
+    # One share normalises as the run's VecNormalize does step by step; two shares each with
+    # their own copy within the rollout, so they are compared without normalisation.
+    [("dummy", True), ("batched", False)],
+)
+def test_a_rollout_played_in_the_workers_is_the_one_sb3_plays(vec_env, normalize):
+    kwargs = dict(
+        n_envs=4,
+        n_steps=96,
+        batch_size=64,
+        seed=3,
+        vec_env=vec_env,
+        normalize=normalize,
+        normalize_reward=normalize,
+        learner="torch",
+    )
+    rollouts = []
+    for workers in (False, True):
+        model, venv = _model(TrainConfig("Foosball-Block-v0", worker_rollouts=workers, **kwargs))
+        try:
+            assert isinstance(model, RolloutPPO) == workers
+            _quiet(model)
+            _collect(model, venv, model.n_steps * 4)
+            buf = model.rollout_buffer
+            stats = []
+            if normalize:
+                stats = [venv.obs_rms.mean, venv.obs_rms.var, venv.ret_rms.var, venv.returns]
+            rollouts.append(
+                [
+                    buf.observations,
+                    buf.actions,
+                    buf.rewards,
+                    buf.episode_starts,
+                    buf.values,
+                    # (not the log-probabilities: with the noise below float32's step, SB3's
+                    # action minus its mean is 0, the drawn noise is not; the policy's test
+                    # compares them)
+                    buf.advantages,
+                    model._last_obs,
+                    *stats,
+                ]
+            )
+            assert model.num_timesteps == 4 * 96
+            assert len(model.ep_info_buffer) > 0  # episodes ended and were counted
+        finally:
+            venv.close()
+    sb3, ours = rollouts
+    # Episodes ended within the rollout, so resets and the truncation bootstrap took part.
+    assert sb3[3][1:].sum() >= 2
+    for expected, got in zip(sb3, ours, strict=True):
+        np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-4)
+
+
+def test_the_numpy_policy_is_the_policy():
+    model, venv = _model(
+        TrainConfig("Foosball-Block-v0", n_envs=1, batch_size=128, vec_env="dummy")
+    )
+    try:
+        policy = model.policy
+        with th.no_grad():
+            policy.log_std.fill_(-0.7)
+        copy = NumpyPolicy.of(policy, model.action_space)
+        obs = np.random.default_rng(0).normal(size=(5, *model.observation_space.shape))
+        actions, values, log_probs = copy.act(obs, np.random.default_rng(1))
+        with th.no_grad():
+            value, log_prob, _ = policy.evaluate_actions(
+                th.as_tensor(obs, dtype=th.float32), th.as_tensor(actions)
+            )
+            mean = policy.get_distribution(th.as_tensor(obs, dtype=th.float32)).distribution.mean
+        np.testing.assert_allclose(values, value.numpy()[:, 0], rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(log_probs, log_prob.numpy(), rtol=1e-5, atol=1e-4)
+        # The draws spread around the mean by the policy's own deviation.
+        draws = np.stack([copy.act(obs, np.random.default_rng(s))[0] for s in range(400)])
+        np.testing.assert_allclose(draws.mean(axis=0), mean.numpy(), atol=0.06)
+        np.testing.assert_allclose(draws.std(axis=0), np.exp(-0.7), rtol=0.12)
+    finally:
+        venv.close()
+
+
+def test_a_run_with_worker_rollouts_trains_resumes_and_loads(tmp_path):
+    pytest.importorskip("jax")
+    run = tmp_path / "run"
+    small = ["--n-envs", "4", "--n-steps", "64", "--batch-size", "64", "--no-progress"]
+    small += ["--lr-schedule", "constant"]
+    small += ["--eval-freq", "100000", "--eval-episodes", "1", "--checkpoint-freq", "256"]
+    argv = ["train", "Foosball-Block-v0", "--out", str(run), "--worker-rollouts", *small]
+    assert main([*argv, "--timesteps", "512"]) == 0
+    assert json.loads((run / "config.json").read_text())["worker_rollouts"] is True
+    first = PPO.load(run / "model.zip", device="cpu", custom_objects=sb3_objects(run / "model.zip"))
+    assert main(["train", "--resume", str(run), "--timesteps", "1024", "--no-progress"]) == 0
+    second = PPO.load(
+        run / "model.zip", device="cpu", custom_objects=sb3_objects(run / "model.zip")
+    )
+    assert second.num_timesteps == 1024
+    moved = [
+        not th.equal(a, b)
+        for a, b in zip(first.policy.parameters(), second.policy.parameters(), strict=True)
+    ]
+    assert any(moved)  # the resumed run went on learning
+
+
+@pytest.mark.parametrize(
+    ("bad", "message"),
+    [
+        ({"algo": "sac"}, "sac learns from a replay buffer"),
+        ({"use_sde": True}, "use_sde's noise is drawn in the training process"),
+        ({"vec_env": "subproc"}, "needs vec_env batched or dummy"),
+    ],
+)
+def test_what_worker_rollouts_cannot_play_is_refused(bad, message):
+    with pytest.raises(ValueError, match=message):
+        TrainConfig("Foosball-Block-v0", worker_rollouts=True, **bad).check()
+
+
+def test_worker_rollouts_with_self_play_is_refused():
+    with pytest.raises(ValueError, match="self-play chooses its opponents' actions"):
+        TrainConfig("Foosball-KeeperVsKeeper-v0", worker_rollouts=True).check()
