@@ -66,12 +66,19 @@ TASKS = {
     "block": Task(
         "Foosball-Block-v0", "builtin:block-scratch", (100_000, 200_000, 300_000, 500_000)
     ),
-    # The Block recipe as its rows were first measured, with SB3's PyTorch update.
+    # The Block recipe before its rollouts were played in the workers: SB3's rollout loop.
+    "block-sb3-loop": Task(
+        "Foosball-Block-v0",
+        "builtin:block-scratch",
+        (100_000, 200_000, 300_000, 500_000),
+        ("--no-worker-rollouts",),
+    ),
+    # The Block recipe as its rows were first measured: SB3's rollout loop and PyTorch update.
     "block-torch": Task(
         "Foosball-Block-v0",
         "builtin:block-scratch",
         (100_000, 200_000, 300_000, 500_000),
-        ("--learner", "torch"),
+        ("--learner", "torch", "--no-worker-rollouts"),
     ),
     "score-resting": Task(
         "Foosball-Score-v0",
