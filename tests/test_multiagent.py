@@ -25,6 +25,7 @@ from pettingzoo.utils.conversions import parallel_to_aec  # noqa: E402
 from foosball_gym import table  # noqa: E402
 from foosball_gym.envs.rewards import (  # noqa: E402
     TERMS,
+    ball_aim_potential,
     ball_to_goal_potential,
     figurine_to_ball_potential,
 )
@@ -39,6 +40,7 @@ AGREEMENT_STEPS = {"Foosball-KeeperVsKeeper-v0": 300, "Foosball-FullGame-v0": 25
 SHAPED = {
     "ball_to_goal_weight": 1.0,
     "figurine_to_ball_weight": 1.0,
+    "ball_aim_weight": 1.0,
     "action_regularisation_weight": 0.5,
 }
 
@@ -156,25 +158,30 @@ def test_each_side_gets_its_own_shaping_and_out_of_table_terms(env_id, make_game
     n_home = len(layout.controlled)
 
     def away_potentials():
-        x, y = u.game.ball[0], u.game.ball[1]
+        x, y, vx, vy = u.game.ball
         slides = u.game.positions[n_home : n_home + len(away_rods)]
-        # In the world frame: distance to the home goal, the away rods' own figurines.
-        return ball_to_goal_potential(-x, -y), figurine_to_ball_potential(
-            y, [rod.figurine_y(s) for rod, s in zip(away_rods, slides)]
+        # In the world frame: distance to the home goal, the away rods' own figurines, the
+        # aim at the home goal.
+        return (
+            ball_to_goal_potential(-x, -y),
+            figurine_to_ball_potential(y, [rod.figurine_y(s) for rod, s in zip(away_rods, slides)]),
+            ball_aim_potential(-x, -y, -vx, -vy),
         )
 
     rng = np.random.default_rng(5)
-    game.reset(seed=2)
-    phi_goal, phi_fig = away_potentials()
+    # The ball served towards the home goal, so that the away side's aim term counts.
+    game.reset(seed=2, options={"ball_position": (0.0, 0.05), "ball_velocity": (-2.0, 0.3)})
+    phi_goal, phi_fig, phi_aim = away_potentials()
     last = np.zeros(game.action_space("away").shape)
-    differs = False
+    differs = aimed = False
     for _ in range(60):
         actions = random_actions(game, rng)
         _, rewards, terminated, truncated, info = game.step(actions)
         away = info["away"]
-        new_goal, new_fig = away_potentials()
+        new_goal, new_fig, new_aim = away_potentials()
         assert away["reward_ball_to_goal"] == pytest.approx(new_goal - phi_goal, abs=1e-12)
         assert away["reward_figurine_to_ball"] == pytest.approx(new_fig - phi_fig, abs=1e-12)
+        assert away["reward_ball_aim"] == pytest.approx(new_aim - phi_aim, abs=1e-12)
         a = actions["away"].astype(float)
         assert away["reward_action_regularisation"] == pytest.approx(
             -0.5 * np.mean((a - last) ** 2)
@@ -185,10 +192,12 @@ def test_each_side_gets_its_own_shaping_and_out_of_table_terms(env_id, make_game
                 sum(info[agent]["reward_" + name] for name in TERMS)
             )
         differs |= away["reward_figurine_to_ball"] != info["home"]["reward_figurine_to_ball"]
-        phi_goal, phi_fig, last = new_goal, new_fig, a
+        aimed |= new_aim > 0
+        phi_goal, phi_fig, phi_aim, last = new_goal, new_fig, new_aim, a
         if terminated["home"] or truncated["home"]:
             break
     assert differs, "the two sides' rods are apart: their figurine terms should differ"
+    assert aimed, "the ball should have headed for the home goal: the away aim term untested"
 
 
 @pytest.mark.parametrize("env_id", GAME_IDS)

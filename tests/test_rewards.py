@@ -8,7 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from foosball_gym import ENV_IDS
+from foosball_gym import ENV_IDS, table
 from foosball_gym.envs.rewards import TERMS
 
 
@@ -54,6 +54,7 @@ def test_reward_is_the_sum_of_the_terms_in_info(env_id):
         env_id,
         ball_to_goal_weight=1.0,
         figurine_to_ball_weight=2.0,
+        ball_aim_weight=3.0,
         action_regularisation_weight=0.5,
     )
     try:
@@ -71,6 +72,47 @@ def test_reward_is_the_sum_of_the_terms_in_info(env_id):
             if terminated or truncated:
                 env.reset()
         assert {"ball_to_goal", "figurine_to_ball", "action_regularisation"} <= seen_nonzero
+    finally:
+        env.close()
+
+
+def test_ball_aim_potential_follows_the_path_to_the_goal_mouth():
+    from foosball_gym.envs.rewards import ball_aim_potential
+
+    line = table.GOAL_LINE_X
+    mouth = table.GOAL_HALF_WIDTH - table.BALL_RADIUS
+    half = table.FIELD_HALF_WIDTH - table.BALL_RADIUS
+    # Straight at the middle, and along a path that crosses just inside a post.
+    assert ball_aim_potential(-0.5, 0.0, 5.0, 0.0) == 1.0
+    assert ball_aim_potential(line - 0.5, 0.0, 5.0, 5.0 * (mouth - 0.001) / 0.5) == 1.0
+    # 5 cm beside the post: e^-1; the same miss reached off a side wall is judged alike.
+    beside = ball_aim_potential(line - 0.5, 0.0, 5.0, 5.0 * (mouth + 0.05) / 0.5)
+    assert beside == pytest.approx(math.exp(-1.0))
+    # Off the +y wall: from y=0 the path rises half, then comes back down to the mouth + 5 cm.
+    run = 0.8
+    rise = half + (half - mouth - 0.05)
+    assert ball_aim_potential(line - run, 0.0, 4.0, 4.0 * rise / run) == pytest.approx(beside)
+    # A bank into the mouth is on target.
+    rise = half + half  # off the wall and back to the middle
+    assert ball_aim_potential(line - run, 0.0, 4.0, 4.0 * rise / run) == pytest.approx(1.0)
+    # Not on its way: too slow, away from the goal, or past the line.
+    assert ball_aim_potential(0.0, 0.0, 0.4, 0.0) == 0.0
+    assert ball_aim_potential(0.0, 0.0, -5.0, 0.0) == 0.0
+    assert ball_aim_potential(line + 0.01, 0.0, 5.0, 0.0) == 0.0
+
+
+def test_ball_aim_rewards_a_shot_aimed_at_the_mouth():
+    """Score from rest: a ball pushed at the mouth gains the aim term's weight at once."""
+    env = gym.make("Foosball-Score-v0", ball_aim_weight=100.0, goal_reward=0.0)
+    try:
+        env.reset(options={"ball_position": (0.1, 0.0), "ball_velocity": (3.0, 0.0)})
+        _, _, _, _, info = env.step([0.0, 0.0])
+        # At reset the ball already heads for the mouth: no change, nothing rewarded.
+        assert info["reward_ball_aim"] == pytest.approx(0.0, abs=1e-9)
+        env.reset(options={"ball_position": (0.1, 0.0), "ball_velocity": (0.0, 0.0)})
+        env.unwrapped.sim.place_ball((0.1, 0.0), (3.0, 0.0, 0.0))
+        _, reward, _, _, info = env.step([0.0, 0.0])
+        assert info["reward_ball_aim"] == pytest.approx(100.0)
     finally:
         env.close()
 

@@ -70,6 +70,10 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
       opponent's goal (0: off).
     - `figurine_to_ball_weight`: the weight of the potential of the controlled figurines'
       distance to the ball (0: off).
+    - `ball_aim_weight`: the weight of the potential of the ball's aim (not one of the paper's
+      terms): 1 while the ball heads for the opponent's goal mouth along its straight path, the
+      side walls' bounces included, falling by e for each 5 cm the path passes beside it, and
+      0 while the ball is not moving towards that goal at 0.5 m/s or more (0: off).
     - `action_regularisation_weight`: the weight of `-mean((a_t - a_{t-1})^2)`, which
       penalises jerky actions (0: off).
     - `shaping`: how the potentials are rewarded. `"difference"` is the authors' per-step
@@ -378,7 +382,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         game.start(start)
         if self._safety is not None:
             self._safety.reset(game.own_readings())
-        self._rewards.reset(self._controlled_slides(), game.ball[0], game.ball[1], self._n_act)
+        self._rewards.reset(self._controlled_slides(), game.ball, self._n_act)
         if self._estimated is not None:
             self._estimated.reset(game.ball, game.positions, self.sim.figurine_positions())
 
@@ -418,8 +422,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             outcome.goal,
             outcome.out_of_table,
             self._controlled_slides(),
-            game.ball[0],
-            game.ball[1],
+            game.ball,
             act,
             terminated,
         )

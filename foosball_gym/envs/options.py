@@ -56,6 +56,7 @@ class EnvOptions(TypedDict, total=False):
     out_of_table_penalty: float
     ball_to_goal_weight: float
     figurine_to_ball_weight: float
+    ball_aim_weight: float
     action_regularisation_weight: float
     shaping: Literal["difference", "potential"]
     gamma: float
@@ -106,6 +107,7 @@ class SharedOptions:
     out_of_table_penalty: float = 1000.0
     ball_to_goal_weight: float = 0.0
     figurine_to_ball_weight: float = 0.0
+    ball_aim_weight: float = 0.0
     action_regularisation_weight: float = 0.0
     shaping: Literal["difference", "potential"] = "difference"
     gamma: float = 0.99
@@ -208,6 +210,7 @@ def check_shared(
         out_of_table=o.out_of_table_penalty,
         ball_to_goal=o.ball_to_goal_weight,
         figurine_to_ball=o.figurine_to_ball_weight,
+        ball_aim=o.ball_aim_weight,
         action_regularisation=o.action_regularisation_weight,
         shaping=o.shaping,
         gamma=o.gamma,

@@ -2,7 +2,8 @@
 
 Base terms: ``goal`` (+weight for a goal scored, -weight for one conceded) and
 ``out_of_table`` (-weight when the ball leaves the table upwards). Shaping terms, off at weight
-0: ``ball_to_goal`` and ``figurine_to_ball`` are potentials Φ(s) rewarded either as the
+0: ``ball_to_goal``, ``figurine_to_ball`` and ``ball_aim`` (not the paper's: how near the goal
+mouth the ball's path leads) are potentials Φ(s) rewarded either as the
 authors' per-step difference ``w·(Φ(s') - Φ(s))`` or as potential-based shaping
 ``w·(γ·Φ(s') - Φ(s))`` (with Φ = 0 at the end of an episode, so the optimal policy is
 unchanged); ``action_regularisation`` is ``-w·mean((a_t - a_{t-1})²)`` every step.
@@ -17,7 +18,14 @@ from dataclasses import dataclass
 from foosball_gym import table
 
 SHAPING_MODES = ("difference", "potential")
-TERMS = ("goal", "out_of_table", "ball_to_goal", "figurine_to_ball", "action_regularisation")
+TERMS = (
+    "goal",
+    "out_of_table",
+    "ball_to_goal",
+    "figurine_to_ball",
+    "ball_aim",
+    "action_regularisation",
+)
 
 
 @dataclass(frozen=True)
@@ -26,6 +34,7 @@ class RewardWeights:
     out_of_table: float = 1000.0
     ball_to_goal: float = 0.0
     figurine_to_ball: float = 0.0
+    ball_aim: float = 0.0
     action_regularisation: float = 0.0
     shaping: str = "difference"
     gamma: float = 0.99
@@ -58,6 +67,27 @@ def figurine_to_ball_potential(ball_y: float, figurine_y: Sequence[Sequence[floa
     return -(1.0 - total / len(figurine_y))
 
 
+# A ball slower than this towards the goal is not on its way there.
+AIM_MIN_SPEED = 0.5  # m/s
+# Φ falls by e for each 5 cm that the path passes beside the mouth.
+AIM_FALL = 20.0  # 1/m
+
+
+def ball_aim_potential(x: float, y: float, vx: float, vy: float) -> float:
+    """exp(-20 m), m how far beside the away goal mouth the ball's straight path crosses the
+    goal line, the side walls' bounces folded in (0 in the mouth), while the ball moves towards
+    that line at AIM_MIN_SPEED or more; 0 otherwise (home attacks +x)."""
+    if vx < AIM_MIN_SPEED or x >= table.GOAL_LINE_X:
+        return 0.0
+    half = table.FIELD_HALF_WIDTH - table.BALL_RADIUS
+    crossing = y + vy * (table.GOAL_LINE_X - x) / vx + half
+    # Each bounce off a side wall mirrors the path: fold the crossing into the field.
+    crossing %= 4 * half
+    crossing = (crossing if crossing <= 2 * half else 4 * half - crossing) - half
+    beside = abs(crossing) - (table.GOAL_HALF_WIDTH - table.BALL_RADIUS)
+    return math.exp(-AIM_FALL * beside) if beside > 0 else 1.0
+
+
 class RewardComputer:
     """Keeps the previous potentials and action; returns the terms of each step.
 
@@ -71,25 +101,29 @@ class RewardComputer:
         self.rods = tuple(rods)
         self._phi_goal = 0.0
         self._phi_fig = 0.0
+        self._phi_aim = 0.0
         self._last_action: list[float] | None = None
         self._potential = weights.shaping == "potential"
 
     def _potentials(
-        self, slide: Sequence[float], ball_x: float, ball_y: float
-    ) -> tuple[float, float]:
+        self, slide: Sequence[float], ball: Sequence[float]
+    ) -> tuple[float, float, float]:
         w = self.w
+        ball_x, ball_y = ball[0], ball[1]
         phi_goal = ball_to_goal_potential(ball_x, ball_y) if w.ball_to_goal else 0.0
+        phi_aim = ball_aim_potential(*ball[:4]) if w.ball_aim else 0.0
         if w.figurine_to_ball and self.rods:
             phi_fig = figurine_to_ball_potential(
                 ball_y, [rod.figurine_y(s) for rod, s in zip(self.rods, slide)]
             )
         else:
             phi_fig = 0.0
-        return phi_goal, phi_fig
+        return phi_goal, phi_fig, phi_aim
 
-    def reset(self, slide: Sequence[float], ball_x: float, ball_y: float, n_actions: int) -> None:
-        """Start an episode from a state; ``slide`` holds the controlled rods' slide values."""
-        self._phi_goal, self._phi_fig = self._potentials(slide, ball_x, ball_y)
+    def reset(self, slide: Sequence[float], ball: Sequence[float], n_actions: int) -> None:
+        """Start an episode from a state; ``slide`` holds the controlled rods' slide values,
+        ``ball`` the ball's x, y, vx and vy."""
+        self._phi_goal, self._phi_fig, self._phi_aim = self._potentials(slide, ball)
         self._last_action = [0.0] * n_actions
 
     def step(
@@ -97,15 +131,14 @@ class RewardComputer:
         goal: int,
         out_of_table: bool,
         slide: Sequence[float],
-        ball_x: float,
-        ball_y: float,
+        ball: Sequence[float],
         action: Sequence[float],
         terminal: bool,
     ) -> dict[str, float]:
         """Reward terms for one step, keyed by term name (their sum is the reward)."""
         w = self.w
-        phi_goal, phi_fig = (
-            (0.0, 0.0) if terminal and self._potential else self._potentials(slide, ball_x, ball_y)
+        phi_goal, phi_fig, phi_aim = (
+            (0.0, 0.0, 0.0) if terminal and self._potential else self._potentials(slide, ball)
         )
         g = w.gamma if self._potential else 1.0
         terms = {
@@ -113,6 +146,7 @@ class RewardComputer:
             "out_of_table": -w.out_of_table if out_of_table else 0.0,
             "ball_to_goal": w.ball_to_goal * (g * phi_goal - self._phi_goal),
             "figurine_to_ball": w.figurine_to_ball * (g * phi_fig - self._phi_fig),
+            "ball_aim": w.ball_aim * (g * phi_aim - self._phi_aim),
             "action_regularisation": 0.0,
         }
         if w.action_regularisation:
@@ -122,5 +156,5 @@ class RewardComputer:
             diff = sum((a - b) ** 2 for a, b in zip(action, last)) / max(len(action), 1)
             terms["action_regularisation"] = -w.action_regularisation * diff
         self._last_action = list(action)
-        self._phi_goal, self._phi_fig = phi_goal, phi_fig
+        self._phi_goal, self._phi_fig, self._phi_aim = phi_goal, phi_fig, phi_aim
         return terms

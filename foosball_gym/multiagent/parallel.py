@@ -68,7 +68,8 @@ class FoosballParallelEnv(ParallelEnv):
 
     ## Rewards
     Each agent gets the single-agent terms of its own side: ``out_of_table``,
-    ``ball_to_goal``, ``figurine_to_ball`` and ``action_regularisation`` are computed for the
+    ``ball_to_goal``, ``figurine_to_ball``, ``ball_aim`` and ``action_regularisation`` are
+    computed for the
     away agent on the mirrored state, as the single-agent env computes them for its learner.
     The ``goal`` term is zero-sum: ``+goal_reward`` to the scorer, ``-goal_reward`` to the
     other side. Every term is also in ``infos[agent]["reward_<name>"]``.
@@ -232,15 +233,15 @@ class FoosballParallelEnv(ParallelEnv):
         decided = continuous and env.task.match_over(game.goals_for, game.goals_against)
         terminal = outcome.ended and (not continuous or decided)
         self._steps += 1
-        x, y = game.ball[0], game.ball[1]
+        ball = game.ball
+        mirrored = tuple(-v for v in ball)
         positions = game.positions
         terms = {
             "home": self._rewards["home"].step(
                 outcome.goal,
                 outcome.out_of_table,
                 positions[self._slides["home"]],
-                x,
-                y,
+                ball,
                 act["home"],
                 terminal,
             ),
@@ -248,8 +249,7 @@ class FoosballParallelEnv(ParallelEnv):
                 -outcome.goal,
                 outcome.out_of_table,
                 positions[self._slides["away"]],
-                -x,
-                -y,
+                mirrored,
                 act["away"],
                 terminal,
             ),
@@ -300,10 +300,9 @@ class FoosballParallelEnv(ParallelEnv):
 
     def _reset_rewards(self) -> None:
         game = self._env.game
-        x, y = game.ball[0], game.ball[1]
         for agent, sign in (("home", 1.0), ("away", -1.0)):
             self._rewards[agent].reset(
-                game.positions[self._slides[agent]], sign * x, sign * y, self._n_act
+                game.positions[self._slides[agent]], [sign * v for v in game.ball], self._n_act
             )
 
     def _away_info(self, home_info: dict[str, Any]) -> dict[str, Any]:
