@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import pickle
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch as th
@@ -35,6 +35,9 @@ from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from foosball_gym.training.sb3.mlp_layers import mlp_layers
+
+if TYPE_CHECKING:
+    from foosball_gym.training.sb3.in_process_vec_env import InProcessVecEnv
 
 _HALF_LOG_2PI = np.float32(0.5 * np.log(2 * np.pi))
 
@@ -123,8 +126,19 @@ class RolloutPlan:
 
 
 @dataclass
+class SeenStatistics:
+    """What a share's copy of VecNormalize saw in a rollout, for the run's own."""
+
+    raw_obs: np.ndarray  # the environments' observations, a leading step axis
+    raw_returns: np.ndarray  # the running returns as the statistics took them
+    returns: np.ndarray  # the running returns at the end
+    last_raw_obs: np.ndarray
+    last_raw_reward: np.ndarray
+
+
+@dataclass
 class RolloutPart:
-    """A share's rollout, arrays with a leading step axis, and what its normaliser saw."""
+    """A share's rollout, arrays with a leading step axis."""
 
     observations: np.ndarray
     actions: np.ndarray
@@ -134,15 +148,11 @@ class RolloutPart:
     dones: np.ndarray
     infos: list[list[dict[str, Any]]]
     last_obs: np.ndarray
-    raw_obs: np.ndarray  # the environments' observations, for the run's statistics
-    raw_returns: np.ndarray  # the running returns as the statistics took them
-    returns: np.ndarray | None  # the running returns at the end
-    last_raw_obs: np.ndarray
-    last_raw_reward: np.ndarray
     reset_infos: list[dict[str, Any]]
+    seen: SeenStatistics | None
 
 
-def play_rollout(envs: VecEnv, plan: RolloutPlan) -> RolloutPart:
+def play_rollout(envs: InProcessVecEnv, plan: RolloutPlan) -> RolloutPart:
     """Play ``plan`` on ``envs`` (a share of the run's environments, unnormalised)."""
     norm: VecNormalize | None = None
     stepped: VecEnv = envs
@@ -161,19 +171,17 @@ def play_rollout(envs: VecEnv, plan: RolloutPlan) -> RolloutPart:
     log_probs = np.empty((n, k), np.float32)
     dones = np.empty((n, k), bool)
     raw_obs = np.empty((n, *obs.shape), np.float64)
-    raw_returns = np.zeros((n, k), np.float64)
+    raw_returns = np.empty((n, k), np.float64)
     infos = []
     for t in range(n):
         observations[t] = obs
         actions[t], values[t], log_probs[t] = policy.act(obs, rng)
-        before = None if norm is None else norm.returns.copy()
+        if norm is not None:
+            returns = norm.returns.copy()
         obs, reward, dones[t], info = stepped.step(np.clip(actions[t], policy.low, policy.high))
         if norm is not None:
-            assert before is not None
             raw_obs[t] = norm.old_obs
-            raw_returns[t] = before * norm.gamma + norm.old_reward
-        else:
-            raw_obs[t] = obs
+            raw_returns[t] = returns * norm.gamma + norm.old_reward
         for i in np.flatnonzero(dones[t]):
             if info[i].get("terminal_observation") is not None and info[i].get(
                 "TimeLimit.truncated", False
@@ -181,22 +189,11 @@ def play_rollout(envs: VecEnv, plan: RolloutPlan) -> RolloutPart:
                 reward[i] += plan.gamma * policy.value(info[i]["terminal_observation"])
         rewards[t] = reward
         infos.append(info)
-    return RolloutPart(
-        observations,
-        actions,
-        rewards,
-        values,
-        log_probs,
-        dones,
-        infos,
-        np.asarray(obs),
-        raw_obs,
-        raw_returns,
-        None if norm is None else norm.returns,
-        raw_obs[-1],
-        norm.old_reward if norm is not None else rewards[-1],
-        list(getattr(envs, "reset_infos", [{}] * k)),
-    )
+    seen = None
+    if norm is not None:
+        seen = SeenStatistics(raw_obs, raw_returns, norm.returns, raw_obs[-1], norm.old_reward)
+    part = (observations, actions, rewards, values, log_probs, dones, infos, np.asarray(obs))
+    return RolloutPart(*part, list(envs.reset_infos), seen)
 
 
 class WorkerRollouts:
@@ -237,11 +234,11 @@ class WorkerRollouts:
         parts: list[RolloutPart] = inner.play_rollouts(plans)
 
         def joined(name: str, axis: int = 1) -> np.ndarray:
-            return np.concatenate([getattr(p, name) for p in parts], axis=axis)
+            return _joined(parts, name, axis)
 
         dones = joined("dones")
         if norm is not None:
-            _take_statistics(norm, parts, joined)
+            _take_statistics(norm, [p.seen for p in parts if p.seen is not None])
         inner.reset_infos = [info for p in parts for info in p.reset_infos]
         step_infos = [[info for p in parts for info in p.infos[t]] for t in range(n_rollout_steps)]
         for t in range(n_rollout_steps):
@@ -270,10 +267,14 @@ class WorkerRollouts:
         return True
 
 
-def _take_statistics(norm: VecNormalize, parts: list[RolloutPart], joined: Any) -> None:
+def _take_statistics(norm: VecNormalize, seen: list[SeenStatistics]) -> None:
     """Give the run's VecNormalize what the shares' copies saw: the statistics of every
     observation and running return of the rollout, the returns and the last step's raw
     observation and reward."""
+
+    def joined(name: str, axis: int = 1) -> np.ndarray:
+        return _joined(seen, name, axis)
+
     if norm.training:
         if norm.norm_obs:
             raw = joined("raw_obs")
@@ -282,3 +283,8 @@ def _take_statistics(norm: VecNormalize, parts: list[RolloutPart], joined: Any) 
     norm.returns = joined("returns", axis=0)
     norm.old_obs = joined("last_raw_obs", axis=0)
     norm.old_reward = joined("last_raw_reward", axis=0)
+
+
+def _joined(parts: list[Any], name: str, axis: int) -> np.ndarray:
+    """The shares' arrays ``name`` joined along the environments' axis, in the shares' order."""
+    return np.concatenate([getattr(part, name) for part in parts], axis=axis)
