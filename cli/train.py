@@ -172,7 +172,7 @@ def add_parser(subparsers: Any) -> None:
     _on_off(
         p,
         "worker_rollouts",
-        fields_by_name["worker_rollouts"].metadata["help"] + " (off)",
+        fields_by_name["worker_rollouts"].metadata["help"],
         "run the policy in the training process once a step, as SB3 does",
     )
     p.add_argument(
