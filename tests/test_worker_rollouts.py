@@ -6,6 +6,7 @@ a run with it trains, resumes and loads as any other, and what it cannot play is
 from __future__ import annotations
 
 import json
+from copy import deepcopy
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ pytest.importorskip("stable_baselines3")
 
 import torch as th  # noqa: E402
 from stable_baselines3 import PPO  # noqa: E402
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList  # noqa: E402
 
 from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
@@ -37,8 +39,6 @@ def _quiet(model: object) -> None:
 
 
 def _collect(model: object, venv: object, steps: int) -> None:
-    from stable_baselines3.common.callbacks import CallbackList
-
     model._setup_learn(steps, CallbackList([]))
     callback = CallbackList([])
     callback.init_callback(model)
@@ -47,9 +47,9 @@ def _collect(model: object, venv: object, steps: int) -> None:
 
 @pytest.mark.parametrize(
     ("vec_env", "normalize"),
-    # One share normalises as the run's VecNormalize does step by step; two shares each with
-    # their own copy within the rollout, so they are compared without normalisation.
-    [("dummy", True), ("batched", False)],
+    # Normalised with the statistics held still (VecNormalize not learning): SB3 updates them
+    # every step, the workers after the rollout (the next test).
+    [("dummy", True), ("batched", True), ("batched", False)],
 )
 def test_a_rollout_played_in_the_workers_is_the_one_sb3_plays(vec_env, normalize):
     kwargs = dict(
@@ -67,12 +67,14 @@ def test_a_rollout_played_in_the_workers_is_the_one_sb3_plays(vec_env, normalize
         model, venv = _model(TrainConfig("Foosball-Block-v0", worker_rollouts=workers, **kwargs))
         try:
             assert isinstance(model, RolloutPPO) == workers
+            if normalize:
+                venv.training = False
+                venv.obs_rms.mean[:] = 0.1
+                venv.obs_rms.var[:] = 4.0
+                venv.ret_rms.var = 9.0
             _quiet(model)
             _collect(model, venv, model.n_steps * 4)
             buf = model.rollout_buffer
-            stats = []
-            if normalize:
-                stats = [venv.obs_rms.mean, venv.obs_rms.var, venv.ret_rms.var, venv.returns]
             rollouts.append(
                 [
                     buf.observations,
@@ -85,7 +87,7 @@ def test_a_rollout_played_in_the_workers_is_the_one_sb3_plays(vec_env, normalize
                     # compares them)
                     buf.advantages,
                     model._last_obs,
-                    *stats,
+                    *([venv.returns] if normalize else []),
                 ]
             )
             assert model.num_timesteps == 4 * 96
@@ -99,6 +101,40 @@ def test_a_rollout_played_in_the_workers_is_the_one_sb3_plays(vec_env, normalize
         np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-4)
 
 
+def test_the_statistics_take_in_every_observation_and_return_after_the_rollout():
+    config = TrainConfig("Foosball-Block-v0", n_envs=4, n_steps=64, batch_size=64, seed=2)
+    model, venv = _model(config)
+    try:
+        seen = []
+
+        class Record(BaseCallback):
+            def _on_step(self) -> bool:
+                # The callbacks see the statistics the rollout was normalised with.
+                assert venv.obs_rms.count == before[0].count
+                seen.append(venv.unnormalize_obs(self.locals["new_obs"]))
+                return True
+
+        model._setup_learn(256, CallbackList([]))  # resets the environments
+        # Wide statistics, so that no observation is clipped and each can be recovered.
+        venv.obs_rms.mean[:], venv.obs_rms.var[:] = 0.1, 16.0
+        before = deepcopy(venv.obs_rms), deepcopy(venv.ret_rms)
+        callback = CallbackList([Record()])
+        callback.init_callback(model)
+        first = venv.unnormalize_obs(model._last_obs)
+        assert model.collect_rollouts(venv, callback, model.rollout_buffer, model.n_steps)
+        # Every observation the environments gave in the rollout (its new_obs, step by step,
+        # those after a reset included), and nothing else: SB3's VecNormalize takes the same.
+        expected = deepcopy(before[0])
+        expected.update(np.concatenate(seen))
+        np.testing.assert_allclose(venv.obs_rms.mean, expected.mean, rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(venv.obs_rms.var, expected.var, rtol=1e-5, atol=1e-6)
+        assert venv.obs_rms.count == pytest.approx(before[0].count + 64 * 4)
+        assert venv.ret_rms.count == pytest.approx(before[1].count + 64 * 4)
+        assert first.shape == seen[0].shape
+    finally:
+        venv.close()
+
+
 def test_the_numpy_policy_is_the_policy():
     model, venv = _model(
         TrainConfig("Foosball-Block-v0", n_envs=1, batch_size=128, vec_env="dummy")
@@ -109,7 +145,8 @@ def test_the_numpy_policy_is_the_policy():
             policy.log_std.fill_(-0.7)
         copy = NumpyPolicy.of(policy, model.action_space)
         obs = np.random.default_rng(0).normal(size=(5, *model.observation_space.shape))
-        actions, values, log_probs = copy.act(obs, np.random.default_rng(1))
+        rngs = [np.random.default_rng([1, i]) for i in range(5)]
+        actions, values, log_probs = copy.act(obs, rngs, slice(0, 5), 5)
         with th.no_grad():
             value, log_prob, _ = policy.evaluate_actions(
                 th.as_tensor(obs, dtype=th.float32), th.as_tensor(actions)
@@ -118,7 +155,12 @@ def test_the_numpy_policy_is_the_policy():
         np.testing.assert_allclose(values, value.numpy()[:, 0], rtol=1e-5, atol=1e-5)
         np.testing.assert_allclose(log_probs, log_prob.numpy(), rtol=1e-5, atol=1e-4)
         # The draws spread around the mean by the policy's own deviation.
-        draws = np.stack([copy.act(obs, np.random.default_rng(s))[0] for s in range(400)])
+        draws = np.stack(
+            [
+                copy.act(obs, [np.random.default_rng([s, i]) for i in range(5)], slice(0, 5), 5)[0]
+                for s in range(400)
+            ]
+        )
         np.testing.assert_allclose(draws.mean(axis=0), mean.numpy(), atol=0.06)
         np.testing.assert_allclose(draws.std(axis=0), np.exp(-0.7), rtol=0.12)
     finally:

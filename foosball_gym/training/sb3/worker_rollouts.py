@@ -11,33 +11,34 @@ Kept from SB3's loop: the policy itself (its weights in NumPy, float32), actions
 Gaussian and clipped to the action space for the environments, the buffer's unclipped actions,
 values and log-probabilities, rewards of truncated episodes bootstrapped with the value of their
 last observation, VecNormalize's own code for the observations and rewards (a copy of the
-run's, in each share), its statistics updated by every observation and return of the rollout,
-and every callback called once a step, in order, with that step's infos and dones.
+run's, in each share), its statistics taking in every observation and return of the rollout,
+and every callback called once a step, in order, with that step's locals as SB3 names them
+(``new_obs``, ``rewards``, ``dones``, ``infos``, ``actions``, ``clipped_actions``, ``values``,
+``log_probs``).
 
-What differs: the exploration noise is NumPy's, seeded by the run's seed, step and share, not
-PyTorch's; within a rollout each share normalises with the statistics of the rollout's start
-updated by its own observations only (after the rollout they are those of all of them); and the
-callbacks are called once the rollout is played, so one that changes the environments (a serve
-curriculum) acts from the next rollout on, and a stop asked for mid-rollout comes after the
-environments have played it.
+What differs: the exploration noise is NumPy's, each environment's drawn by a generator of its
+own seeded by the run's seed, the step and the environment's index, not PyTorch's; within a
+rollout the observations and rewards are normalised with the statistics as they stood at its
+start, which take in the rollout's observations and returns once its callbacks have run (SB3
+updates them every step); and the callbacks run once the rollout is played, so a stop asked for
+mid-rollout comes after the environments have played it. Neither the noise nor the
+normalisation depends on how the environments are split, so a seeded run trains the same policy
+with its environments batched over the cores or all in one process.
 """
 
 from __future__ import annotations
 
 import pickle
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.utils import obs_as_tensor
-from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 
 from foosball_gym.training.sb3.mlp_layers import mlp_layers
-
-if TYPE_CHECKING:
-    from foosball_gym.training.sb3.in_process_vec_env import InProcessVecEnv
 
 _HALF_LOG_2PI = np.float32(0.5 * np.log(2 * np.pi))
 
@@ -99,28 +100,38 @@ class NumpyPolicy:
         return self._forward(self.vf, np.asarray(obs, np.float32))[..., 0]
 
     def act(
-        self, obs: np.ndarray, rng: np.random.Generator
+        self, obs: np.ndarray, rngs: list[np.random.Generator], rows: slice, total: int
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Sampled actions (unclipped), the values and the actions' log-probabilities."""
-        obs = np.asarray(obs, np.float32)
-        mean = self._forward(self.pi, obs)
-        noise = rng.standard_normal(mean.shape, dtype=np.float32)
+        """Sampled actions (unclipped), the values and the actions' log-probabilities; the noise
+        of each row of ``obs`` is drawn by its own generator.
+
+        ``obs`` holds the ``rows`` of a batch of ``total``: they are computed in a batch of that
+        size, at those rows, because BLAS rounds a row's product differently in batches of other
+        sizes, and a run should not depend on how its environments are split."""
+        batch = np.zeros((total, *obs.shape[1:]), np.float32)
+        batch[rows] = obs
+        mean = self._forward(self.pi, batch)[rows]
+        values = self._forward(self.vf, batch)[rows, 0]
+        size = mean.shape[-1]
+        noise = np.stack([rng.standard_normal(size, dtype=np.float32) for rng in rngs])
         actions = mean + np.exp(self.log_std) * noise
         log_prob = -(0.5 * noise * noise + self.log_std + _HALF_LOG_2PI).sum(axis=-1)
-        return actions, self.value(obs), log_prob
+        return actions, values, log_prob
 
 
 @dataclass
 class RolloutPlan:
     """What a share needs to play a rollout: the policy, the steps, the discount, its part of
-    the last observations (normalised), the noise's seed, and the run's VecNormalize (pickled,
-    without its environments) with the share's running returns."""
+    the last observations (normalised), a seed for each environment's noise, and the run's
+    VecNormalize (pickled, without its environments) with the share's running returns."""
 
     policy: NumpyPolicy
     n_steps: int
     gamma: float
     last_obs: np.ndarray
-    seed: list[int]
+    seeds: list[list[int]]  # one per environment of the share
+    rows: slice  # the share's environments among the run's
+    total: int  # the run's environments
     normalisation: bytes | None
     returns: np.ndarray | None
 
@@ -152,16 +163,17 @@ class RolloutPart:
     seen: SeenStatistics | None
 
 
-def play_rollout(envs: InProcessVecEnv, plan: RolloutPlan) -> RolloutPart:
+def play_rollout(envs: DummyVecEnv, plan: RolloutPlan) -> RolloutPart:
     """Play ``plan`` on ``envs`` (a share of the run's environments, unnormalised)."""
     norm: VecNormalize | None = None
     stepped: VecEnv = envs
     if plan.normalisation is not None:
         norm = pickle.loads(plan.normalisation)
         norm.set_venv(envs)
-        norm.returns = np.array(plan.returns, dtype=np.float64)
+        learning, norm.training = norm.training, False  # the start's statistics throughout
+        running = np.array(plan.returns, dtype=np.float64)
         stepped = norm
-    rng = np.random.default_rng(plan.seed)
+    rngs = [np.random.default_rng(seed) for seed in plan.seeds]
     policy, n, k = plan.policy, plan.n_steps, envs.num_envs
     obs: Any = plan.last_obs
     observations = np.empty((n, *obs.shape), np.float32)
@@ -175,13 +187,15 @@ def play_rollout(envs: InProcessVecEnv, plan: RolloutPlan) -> RolloutPart:
     infos = []
     for t in range(n):
         observations[t] = obs
-        actions[t], values[t], log_probs[t] = policy.act(obs, rng)
-        if norm is not None:
-            returns = norm.returns.copy()
+        actions[t], values[t], log_probs[t] = policy.act(obs, rngs, plan.rows, plan.total)
         obs, reward, dones[t], info = stepped.step(np.clip(actions[t], policy.low, policy.high))
         if norm is not None:
+            # VecNormalize's running returns, which it keeps only while it learns.
             raw_obs[t] = norm.old_obs
-            raw_returns[t] = returns * norm.gamma + norm.old_reward
+            if learning:
+                running = running * norm.gamma + norm.old_reward
+            raw_returns[t] = running
+            running[dones[t]] = 0
         for i in np.flatnonzero(dones[t]):
             if info[i].get("terminal_observation") is not None and info[i].get(
                 "TimeLimit.truncated", False
@@ -191,7 +205,7 @@ def play_rollout(envs: InProcessVecEnv, plan: RolloutPlan) -> RolloutPart:
         infos.append(info)
     seen = None
     if norm is not None:
-        seen = SeenStatistics(raw_obs, raw_returns, norm.returns, raw_obs[-1], norm.old_reward)
+        seen = SeenStatistics(raw_obs, raw_returns, running, raw_obs[-1], norm.old_reward)
     part = (observations, actions, rewards, values, log_probs, dones, infos, np.asarray(obs))
     return RolloutPart(*part, list(envs.reset_infos), seen)
 
@@ -225,39 +239,61 @@ class WorkerRollouts:
                 n_rollout_steps,
                 model.gamma,
                 model._last_obs[share],
-                [model.seed or 0, model.num_timesteps, i],
+                [[model.seed or 0, model.num_timesteps, i] for i in range(share.start, share.stop)],
+                share,
+                env.num_envs,
                 shared,
                 None if norm is None else norm.returns[share],
             )
-            for i, share in enumerate(inner.shares)
+            for share in inner.shares
         ]
         parts: list[RolloutPart] = inner.play_rollouts(plans)
 
         def joined(name: str, axis: int = 1) -> np.ndarray:
             return _joined(parts, name, axis)
 
-        dones = joined("dones")
-        if norm is not None:
-            _take_statistics(norm, [p.seen for p in parts if p.seen is not None])
+        dones, last_obs = joined("dones"), joined("last_obs", axis=0)
+        observations, actions = joined("observations"), joined("actions")
+        rewards, values, log_probs = joined("rewards"), joined("values"), joined("log_probs")
         inner.reset_infos = [info for p in parts for info in p.reset_infos]
-        step_infos = [[info for p in parts for info in p.infos[t]] for t in range(n_rollout_steps)]
+        space = model.action_space
+        stopped = False
         for t in range(n_rollout_steps):
             model.num_timesteps += env.num_envs
-            infos, step_dones = step_infos[t], dones[t]
-            callback.update_locals({"infos": infos, "dones": step_dones, "n_steps": t})
+            infos = [info for p in parts for info in p.infos[t]]
+            new_obs = observations[t + 1] if t + 1 < n_rollout_steps else last_obs
+            callback.update_locals(
+                {
+                    "new_obs": new_obs,
+                    "rewards": rewards[t],
+                    "dones": dones[t],
+                    "infos": infos,
+                    "actions": actions[t],
+                    "clipped_actions": np.clip(actions[t], space.low, space.high),
+                    "values": values[t],
+                    "log_probs": log_probs[t],
+                    "n_steps": t,
+                }
+            )
             if not callback.on_step():
-                return False
-            model._update_info_buffer(infos, step_dones)
+                stopped = True
+                break
+            model._update_info_buffer(infos, dones[t])
+        # After the callbacks, which saw the statistics the rollout was normalised with.
+        if norm is not None:
+            _take_statistics(norm, [p.seen for p in parts if p.seen is not None])
+        if stopped:
+            return False
 
-        rollout_buffer.observations[:] = joined("observations")
-        rollout_buffer.actions[:] = joined("actions")
-        rollout_buffer.rewards[:] = joined("rewards")
-        rollout_buffer.values[:] = joined("values")
-        rollout_buffer.log_probs[:] = joined("log_probs")
+        rollout_buffer.observations[:] = observations
+        rollout_buffer.actions[:] = actions
+        rollout_buffer.rewards[:] = rewards
+        rollout_buffer.values[:] = values
+        rollout_buffer.log_probs[:] = log_probs
         rollout_buffer.episode_starts[0] = model._last_episode_starts
         rollout_buffer.episode_starts[1:] = dones[:-1]
         rollout_buffer.pos, rollout_buffer.full = n_rollout_steps, True
-        model._last_obs = joined("last_obs", axis=0)
+        model._last_obs = last_obs
         model._last_episode_starts = dones[-1]
         with th.no_grad():
             values = model.policy.predict_values(obs_as_tensor(model._last_obs, model.device))
