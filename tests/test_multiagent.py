@@ -24,6 +24,7 @@ from pettingzoo.utils.conversions import parallel_to_aec  # noqa: E402
 
 from foosball_gym import table  # noqa: E402
 from foosball_gym.envs.rewards import (  # noqa: E402
+    SOLES_UP_SPIN,
     TERMS,
     ball_aim_potential,
     ball_to_goal_potential,
@@ -41,6 +42,7 @@ SHAPED = {
     "ball_to_goal_weight": 1.0,
     "figurine_to_ball_weight": 1.0,
     "ball_aim_weight": 1.0,
+    "ball_lane_weight": 1.0,
     "action_regularisation_weight": 0.5,
 }
 
@@ -155,33 +157,51 @@ def test_each_side_gets_its_own_shaping_and_out_of_table_terms(env_id, make_game
     u = game.single_agent_env
     layout = u.layout
     away_rods = [table.rod(r) for r in layout.opponent]
+    home_rods = [table.rod(r) for r in layout.controlled]
     n_home = len(layout.controlled)
+    n_rods = len(layout.rods)
+    blocked = False
 
     def away_potentials():
+        nonlocal blocked
         x, y, vx, vy = u.game.ball
-        slides = u.game.positions[n_home : n_home + len(away_rods)]
+        positions = u.game.positions
+        slides = positions[n_home : n_home + len(away_rods)]
+        # The home side's figurines stand in the away side's lanes: seen from the away goal,
+        # at -x and -y, unless their rod is spun up.
+        blockers = [
+            (-rod.x, [-fy for fy in rod.figurine_y(positions[i])])
+            for i, rod in enumerate(home_rods)
+            if abs(positions[n_rods + i]) < SOLES_UP_SPIN
+        ]
+        aim = ball_aim_potential(-x, -y, -vx, -vy)
+        lane = ball_aim_potential(-x, -y, -vx, -vy, blockers)
+        blocked |= lane == 0.0 and aim > 0.0
         # In the world frame: distance to the home goal, the away rods' own figurines, the
-        # aim at the home goal.
+        # aim at the home goal, the lane to it.
         return (
             ball_to_goal_potential(-x, -y),
             figurine_to_ball_potential(y, [rod.figurine_y(s) for rod, s in zip(away_rods, slides)]),
-            ball_aim_potential(-x, -y, -vx, -vy),
+            aim,
+            lane,
         )
 
     rng = np.random.default_rng(5)
-    # The ball served towards the home goal, so that the away side's aim term counts.
-    game.reset(seed=2, options={"ball_position": (0.0, 0.05), "ball_velocity": (-2.0, 0.3)})
-    phi_goal, phi_fig, phi_aim = away_potentials()
+    # The ball served towards the home goal, so that the away side's aim term counts, at first
+    # straight at the home keeper's figurine.
+    game.reset(seed=2, options={"ball_position": (0.0, 0.02), "ball_velocity": (-2.0, 0.0)})
+    phi_goal, phi_fig, phi_aim, phi_lane = away_potentials()
     last = np.zeros(game.action_space("away").shape)
     differs = aimed = False
     for _ in range(60):
         actions = random_actions(game, rng)
         _, rewards, terminated, truncated, info = game.step(actions)
         away = info["away"]
-        new_goal, new_fig, new_aim = away_potentials()
+        new_goal, new_fig, new_aim, new_lane = away_potentials()
         assert away["reward_ball_to_goal"] == pytest.approx(new_goal - phi_goal, abs=1e-12)
         assert away["reward_figurine_to_ball"] == pytest.approx(new_fig - phi_fig, abs=1e-12)
         assert away["reward_ball_aim"] == pytest.approx(new_aim - phi_aim, abs=1e-12)
+        assert away["reward_ball_lane"] == pytest.approx(new_lane - phi_lane, abs=1e-12)
         a = actions["away"].astype(float)
         assert away["reward_action_regularisation"] == pytest.approx(
             -0.5 * np.mean((a - last) ** 2)
@@ -193,11 +213,12 @@ def test_each_side_gets_its_own_shaping_and_out_of_table_terms(env_id, make_game
             )
         differs |= away["reward_figurine_to_ball"] != info["home"]["reward_figurine_to_ball"]
         aimed |= new_aim > 0
-        phi_goal, phi_fig, phi_aim, last = new_goal, new_fig, new_aim, a
+        phi_goal, phi_fig, phi_aim, phi_lane, last = new_goal, new_fig, new_aim, new_lane, a
         if terminated["home"] or truncated["home"]:
             break
     assert differs, "the two sides' rods are apart: their figurine terms should differ"
     assert aimed, "the ball should have headed for the home goal: the away aim term untested"
+    assert blocked, "a home figurine should have stood in the ball's lane: the lane term untested"
 
 
 @pytest.mark.parametrize("env_id", GAME_IDS)

@@ -117,6 +117,64 @@ def test_ball_aim_rewards_a_shot_aimed_at_the_mouth():
         env.close()
 
 
+def test_ball_aim_with_lanes_counts_only_paths_past_the_figurines():
+    from foosball_gym.envs.rewards import LANE_BLOCK, ball_aim_potential, lane_blockers
+
+    keeper = table.rod("away_keeper")
+    half = table.FIELD_HALF_WIDTH - table.BALL_RADIUS
+    # The keeper's figurine on the straight path stops it; just aside, the lane is open.
+    assert ball_aim_potential(-0.5, 0.0, 5.0, 0.0, [(keeper.x, (0.0,))]) == 0.0
+    assert ball_aim_potential(-0.5, 0.0, 5.0, 0.0, [(keeper.x, (LANE_BLOCK - 1e-4,))]) == 0.0
+    assert ball_aim_potential(-0.5, 0.0, 5.0, 0.0, [(keeper.x, (LANE_BLOCK + 1e-4,))]) == 1.0
+    # Behind the ball, a figurine is in no one's way.
+    assert ball_aim_potential(0.3, 0.0, 5.0, 0.0, [(0.2, (0.0,))]) == 1.0
+    # A bank into the middle of the mouth is judged where its folded path crosses a rod: off
+    # the +y wall, three quarters of the way it has risen 1.5 half widths, 0.5 back down.
+    line, run, rise = table.GOAL_LINE_X, 0.8, 2 * half
+    x0, rod_x = line - run, line - run / 4
+    vy = 4.0 * rise / run
+    assert ball_aim_potential(x0, 0.0, 4.0, vy, [(rod_x, (half / 2,))]) == 0.0
+    assert ball_aim_potential(x0, 0.0, 4.0, vy, [(rod_x, (-half / 2,))]) == 1.0
+    # A rod spun up holds its soles above the ball: it blocks nothing.
+    down = lane_blockers([keeper], [0.0, 0.3])
+    assert down == [(keeper.x, keeper.figurine_y(0.0))]
+    assert lane_blockers([keeper], [0.0, 1.2]) == []
+
+
+@pytest.mark.parametrize(
+    ("obstacles", "aim", "lane"),
+    [
+        ((0.0, 0.0, 0.0), 1.0, 0.0),  # the offense's middle figurine is in the way
+        ((0.08, 0.0, 0.092), 1.0, 1.0),  # every figurine beside the path
+    ],
+)
+def test_the_ball_lane_looks_past_the_obstacles(obstacles, aim, lane):
+    """Score with obstacles, the ball heading straight for the mouth: with potential-based
+    shaping a step rewards w * (0.99 * phi' - phi), -1 % of the weight where phi = 1 stays 1."""
+    env = gym.make(
+        "Foosball-Score-v0",
+        obstacles=True,
+        ball_aim_weight=300.0,
+        ball_lane_weight=100.0,
+        shaping="potential",
+        goal_reward=0.0,
+    )
+    try:
+        env.reset(
+            options={
+                "ball_position": (-0.4, 0.0),
+                "ball_velocity": (3.0, 0.0),
+                "obstacle_positions": obstacles,
+            }
+        )
+        _, reward, _, _, info = env.step([0.0, 0.0])
+        assert info["reward_ball_aim"] == pytest.approx(-3.0 * aim, abs=0.05)
+        assert info["reward_ball_lane"] == pytest.approx(-1.0 * lane, abs=0.02)
+        assert reward == pytest.approx(sum(info["reward_" + name] for name in TERMS))
+    finally:
+        env.close()
+
+
 def test_ball_to_goal_potential_is_one_in_the_goal_mouth_and_decays_with_distance():
     from foosball_gym.envs.rewards import ball_to_goal_potential
 

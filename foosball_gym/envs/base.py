@@ -74,6 +74,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
       terms): 1 while the ball heads for the opponent's goal mouth along its straight path, the
       side walls' bounces included, falling by e for each 5 cm the path passes beside it, and
       0 while the ball is not moving towards that goal at 0.5 m/s or more (0: off).
+    - `ball_lane_weight`: the weight of the potential of the ball's lane (not one of the
+      paper's terms): the ball's aim, but 0 while its path meets a figurine of a rod the
+      learner does not drive (one spun up, soles above the ball, stands in no lane) (0: off).
     - `action_regularisation_weight`: the weight of `-mean((a_t - a_{t-1})^2)`, which
       penalises jerky actions (0: off).
     - `shaping`: how the potentials are rewarded. `"difference"` is the authors' per-step
@@ -237,7 +240,17 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         self._last_obs: np.ndarray | None = None
         # This episode's drawn physical parameters (domain randomisation), for every info.
         self._dynamics: dict[str, float] = {}
-        self._rewards = RewardComputer(self.weights, [table.rod(r) for r in layout.controlled])
+        # The rods in play that the learner does not drive: they stand in the ball's lanes.
+        self._blocking = (
+            [i for i, r in enumerate(layout.rods) if r not in layout.controlled]
+            if self.weights.ball_lane
+            else []
+        )
+        self._rewards = RewardComputer(
+            self.weights,
+            [table.rod(r) for r in layout.controlled],
+            [table.rod(layout.rods[i]) for i in self._blocking],
+        )
 
         # Imported here: checking the options and building a task's interface needs no
         # simulator.
@@ -382,7 +395,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         game.start(start)
         if self._safety is not None:
             self._safety.reset(game.own_readings())
-        self._rewards.reset(self._controlled_slides(), game.ball, self._n_act)
+        self._rewards.reset(
+            self._controlled_slides(), game.ball, self._n_act, self._blocking_joints()
+        )
         if self._estimated is not None:
             self._estimated.reset(game.ball, game.positions, self.sim.figurine_positions())
 
@@ -425,6 +440,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             game.ball,
             act,
             terminated,
+            self._blocking_joints(),
         )
         info = self.step_info(outcome, terms)
         if continuous and not decided:
@@ -481,6 +497,13 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def _controlled_slides(self) -> list[float]:
         return self.game.positions[: len(self.layout.controlled)]
+
+    def _blocking_joints(self) -> list[float]:
+        """The slides then the spins of the rods the ball's aim looks past."""
+        if not self._blocking:
+            return []
+        positions, n = self.game.positions, len(self.layout.rods)
+        return [positions[i] for i in self._blocking] + [positions[n + i] for i in self._blocking]
 
     def step_info(self, outcome: Outcome, terms: Mapping[str, float]) -> dict[str, Any]:
         """The info of a step that brought ``outcome`` and these reward terms.

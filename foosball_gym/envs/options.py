@@ -57,6 +57,7 @@ class EnvOptions(TypedDict, total=False):
     ball_to_goal_weight: float
     figurine_to_ball_weight: float
     ball_aim_weight: float
+    ball_lane_weight: float
     action_regularisation_weight: float
     shaping: Literal["difference", "potential"]
     gamma: float
@@ -108,6 +109,7 @@ class SharedOptions:
     ball_to_goal_weight: float = 0.0
     figurine_to_ball_weight: float = 0.0
     ball_aim_weight: float = 0.0
+    ball_lane_weight: float = 0.0
     action_regularisation_weight: float = 0.0
     shaping: Literal["difference", "potential"] = "difference"
     gamma: float = 0.99
@@ -211,6 +213,7 @@ def check_shared(
         ball_to_goal=o.ball_to_goal_weight,
         figurine_to_ball=o.figurine_to_ball_weight,
         ball_aim=o.ball_aim_weight,
+        ball_lane=o.ball_lane_weight,
         action_regularisation=o.action_regularisation_weight,
         shaping=o.shaping,
         gamma=o.gamma,

@@ -2,8 +2,9 @@
 
 Base terms: ``goal`` (+weight for a goal scored, -weight for one conceded) and
 ``out_of_table`` (-weight when the ball leaves the table upwards). Shaping terms, off at weight
-0: ``ball_to_goal``, ``figurine_to_ball`` and ``ball_aim`` (not the paper's: how near the goal
-mouth the ball's path leads) are potentials Φ(s) rewarded either as the
+0: ``ball_to_goal``, ``figurine_to_ball``, ``ball_aim`` and ``ball_lane`` (not the paper's: how
+near the goal mouth the ball's path leads, and the same for a path past the figurines in its
+way) are potentials Φ(s) rewarded either as the
 authors' per-step difference ``w·(Φ(s') - Φ(s))`` or as potential-based shaping
 ``w·(γ·Φ(s') - Φ(s))`` (with Φ = 0 at the end of an episode, so the optimal policy is
 unchanged); ``action_regularisation`` is ``-w·mean((a_t - a_{t-1})²)`` every step.
@@ -24,8 +25,11 @@ TERMS = (
     "ball_to_goal",
     "figurine_to_ball",
     "ball_aim",
+    "ball_lane",
     "action_regularisation",
 )
+# The terms that reward a change of potential.
+POTENTIALS = ("ball_to_goal", "figurine_to_ball", "ball_aim", "ball_lane")
 
 
 @dataclass(frozen=True)
@@ -35,6 +39,7 @@ class RewardWeights:
     ball_to_goal: float = 0.0
     figurine_to_ball: float = 0.0
     ball_aim: float = 0.0
+    ball_lane: float = 0.0
     action_regularisation: float = 0.0
     shaping: str = "difference"
     gamma: float = 0.99
@@ -73,18 +78,51 @@ AIM_MIN_SPEED = 0.5  # m/s
 AIM_FALL = 20.0  # 1/m
 
 
-def ball_aim_potential(x: float, y: float, vx: float, vy: float) -> float:
+# A figurine stops a ball whose centre passes nearer its leg's middle than this.
+LANE_BLOCK = table.FIGURINE_LEG_HALF_WIDTH + table.BALL_RADIUS
+# A rod spun further than this holds its soles above a ball on the table.
+SOLES_UP_SPIN = math.acos((table.ROD_HEIGHT - 2 * table.BALL_RADIUS) / table.FIGURINE_REACH)
+
+#: A rod in the ball's way: its axis' x and the y of each of its figurines.
+Blocker = tuple[float, Sequence[float]]
+
+
+def path_y(x: float, y: float, vx: float, vy: float, target_x: float) -> float:
+    """Where the ball's straight path from (x, y) at (vx, vy), vx > 0, crosses ``target_x``,
+    each bounce off a side wall mirroring it."""
+    half = table.FIELD_HALF_WIDTH - table.BALL_RADIUS
+    crossing = (y + vy * (target_x - x) / vx + half) % (4 * half)
+    return (crossing if crossing <= 2 * half else 4 * half - crossing) - half
+
+
+def lane_blockers(rods: Sequence[table.Rod], joints: Sequence[float]) -> list[Blocker]:
+    """The rods among ``rods`` whose soles are down, as blockers; ``joints`` holds their slides
+    then their spins."""
+    n = len(rods)
+    return [
+        (rod.x, rod.figurine_y(joints[i]))
+        for i, rod in enumerate(rods)
+        if abs(joints[n + i]) < SOLES_UP_SPIN
+    ]
+
+
+def ball_aim_potential(
+    x: float, y: float, vx: float, vy: float, blockers: Sequence[Blocker] = ()
+) -> float:
     """exp(-20 m), m how far beside the away goal mouth the ball's straight path crosses the
     goal line, the side walls' bounces folded in (0 in the mouth), while the ball moves towards
-    that line at AIM_MIN_SPEED or more; 0 otherwise (home attacks +x)."""
+    that line at AIM_MIN_SPEED or more; 0 otherwise, and 0 where the path meets a figurine of
+    ``blockers`` ahead of the ball (home attacks +x)."""
     if vx < AIM_MIN_SPEED or x >= table.GOAL_LINE_X:
         return 0.0
-    half = table.FIELD_HALF_WIDTH - table.BALL_RADIUS
-    crossing = y + vy * (table.GOAL_LINE_X - x) / vx + half
-    # Each bounce off a side wall mirrors the path: fold the crossing into the field.
-    crossing %= 4 * half
-    crossing = (crossing if crossing <= 2 * half else 4 * half - crossing) - half
-    beside = abs(crossing) - (table.GOAL_HALF_WIDTH - table.BALL_RADIUS)
+    for rod_x, figurines in blockers:
+        if rod_x > x:
+            crossing = path_y(x, y, vx, vy, rod_x)
+            if any(abs(crossing - fy) < LANE_BLOCK for fy in figurines):
+                return 0.0
+    beside = abs(path_y(x, y, vx, vy, table.GOAL_LINE_X)) - (
+        table.GOAL_HALF_WIDTH - table.BALL_RADIUS
+    )
     return math.exp(-AIM_FALL * beside) if beside > 0 else 1.0
 
 
@@ -94,36 +132,51 @@ class RewardComputer:
     Args:
         weights: the term weights.
         rods: the controlled rods (for figurine-to-ball).
+        blockers: the rods whose figurines stand in the ball's lanes (for ball-lane).
     """
 
-    def __init__(self, weights: RewardWeights, rods: Sequence[table.Rod]) -> None:
+    def __init__(
+        self,
+        weights: RewardWeights,
+        rods: Sequence[table.Rod],
+        blockers: Sequence[table.Rod] = (),
+    ) -> None:
         self.w = weights
         self.rods = tuple(rods)
-        self._phi_goal = 0.0
-        self._phi_fig = 0.0
-        self._phi_aim = 0.0
+        self.blockers = tuple(blockers)
+        self._phi = dict.fromkeys(POTENTIALS, 0.0)
         self._last_action: list[float] | None = None
         self._potential = weights.shaping == "potential"
 
     def _potentials(
-        self, slide: Sequence[float], ball: Sequence[float]
-    ) -> tuple[float, float, float]:
+        self, slide: Sequence[float], ball: Sequence[float], blocking: Sequence[float]
+    ) -> dict[str, float]:
         w = self.w
-        ball_x, ball_y = ball[0], ball[1]
-        phi_goal = ball_to_goal_potential(ball_x, ball_y) if w.ball_to_goal else 0.0
-        phi_aim = ball_aim_potential(*ball[:4]) if w.ball_aim else 0.0
+        x, y, vx, vy = ball[:4]
+        phi = dict.fromkeys(POTENTIALS, 0.0)
+        if w.ball_to_goal:
+            phi["ball_to_goal"] = ball_to_goal_potential(x, y)
         if w.figurine_to_ball and self.rods:
-            phi_fig = figurine_to_ball_potential(
-                ball_y, [rod.figurine_y(s) for rod, s in zip(self.rods, slide)]
+            phi["figurine_to_ball"] = figurine_to_ball_potential(
+                y, [rod.figurine_y(s) for rod, s in zip(self.rods, slide)]
             )
-        else:
-            phi_fig = 0.0
-        return phi_goal, phi_fig, phi_aim
+        if w.ball_aim:
+            phi["ball_aim"] = ball_aim_potential(x, y, vx, vy)
+        if w.ball_lane:
+            blockers = lane_blockers(self.blockers, blocking)
+            phi["ball_lane"] = ball_aim_potential(x, y, vx, vy, blockers)
+        return phi
 
-    def reset(self, slide: Sequence[float], ball: Sequence[float], n_actions: int) -> None:
+    def reset(
+        self,
+        slide: Sequence[float],
+        ball: Sequence[float],
+        n_actions: int,
+        blocking: Sequence[float] = (),
+    ) -> None:
         """Start an episode from a state; ``slide`` holds the controlled rods' slide values,
-        ``ball`` the ball's x, y, vx and vy."""
-        self._phi_goal, self._phi_fig, self._phi_aim = self._potentials(slide, ball)
+        ``ball`` the ball's x, y, vx and vy, ``blocking`` the blockers' slides then spins."""
+        self._phi = self._potentials(slide, ball, blocking)
         self._last_action = [0.0] * n_actions
 
     def step(
@@ -134,21 +187,23 @@ class RewardComputer:
         ball: Sequence[float],
         action: Sequence[float],
         terminal: bool,
+        blocking: Sequence[float] = (),
     ) -> dict[str, float]:
-        """Reward terms for one step, keyed by term name (their sum is the reward)."""
+        """Reward terms for one step, keyed by term name (their sum is the reward);
+        ``blocking`` holds the blockers' slides then spins."""
         w = self.w
-        phi_goal, phi_fig, phi_aim = (
-            (0.0, 0.0, 0.0) if terminal and self._potential else self._potentials(slide, ball)
-        )
+        if terminal and self._potential:
+            phi = dict.fromkeys(POTENTIALS, 0.0)
+        else:
+            phi = self._potentials(slide, ball, blocking)
         g = w.gamma if self._potential else 1.0
         terms = {
             "goal": w.goal * goal,
             "out_of_table": -w.out_of_table if out_of_table else 0.0,
-            "ball_to_goal": w.ball_to_goal * (g * phi_goal - self._phi_goal),
-            "figurine_to_ball": w.figurine_to_ball * (g * phi_fig - self._phi_fig),
-            "ball_aim": w.ball_aim * (g * phi_aim - self._phi_aim),
-            "action_regularisation": 0.0,
         }
+        for name in POTENTIALS:
+            terms[name] = getattr(w, name) * (g * phi[name] - self._phi[name])
+        terms["action_regularisation"] = 0.0
         if w.action_regularisation:
             last = self._last_action
             if last is None:
@@ -156,5 +211,5 @@ class RewardComputer:
             diff = sum((a - b) ** 2 for a, b in zip(action, last)) / max(len(action), 1)
             terms["action_regularisation"] = -w.action_regularisation * diff
         self._last_action = list(action)
-        self._phi_goal, self._phi_fig, self._phi_aim = phi_goal, phi_fig, phi_aim
+        self._phi = phi
         return terms

@@ -68,9 +68,9 @@ class FoosballParallelEnv(ParallelEnv):
 
     ## Rewards
     Each agent gets the single-agent terms of its own side: ``out_of_table``,
-    ``ball_to_goal``, ``figurine_to_ball``, ``ball_aim`` and ``action_regularisation`` are
-    computed for the
-    away agent on the mirrored state, as the single-agent env computes them for its learner.
+    ``ball_to_goal``, ``figurine_to_ball``, ``ball_aim``, ``ball_lane`` and
+    ``action_regularisation`` are computed for the away agent on the mirrored state, as the
+    single-agent env computes them for its learner.
     The ``goal`` term is zero-sum: ``+goal_reward`` to the scorer, ``-goal_reward`` to the
     other side. Every term is also in ``infos[agent]["reward_<name>"]``.
 
@@ -152,11 +152,23 @@ class FoosballParallelEnv(ParallelEnv):
         # The away side's terms are the single-agent terms of the mirrored state: its rods
         # seen as the home rods they mirror (figurine_y flips sign with the team), the ball
         # turned about the centre of the table.
+        # The rods a side does not drive stand in its ball's lanes (the away side's seen as the
+        # rods they mirror).
+        lanes = bool(env.weights.ball_lane)
+        self._blocking = {
+            agent: [i for i, r in enumerate(layout.rods) if lanes and r not in own]
+            for agent, own in (("home", layout.controlled), ("away", layout.opponent))
+        }
         self._rewards = {
-            "home": RewardComputer(env.weights, [table.rod(r) for r in layout.controlled]),
+            "home": RewardComputer(
+                env.weights,
+                [table.rod(r) for r in layout.controlled],
+                [table.rod(layout.rods[i]) for i in self._blocking["home"]],
+            ),
             "away": RewardComputer(
                 env.weights,
-                [table.rod(f"{table.HOME}_{table.rod(r).role}") for r in layout.opponent],
+                [_mirrored(r) for r in layout.opponent],
+                [_mirrored(layout.rods[i]) for i in self._blocking["away"]],
             ),
         }
         n_home = len(layout.controlled)
@@ -244,6 +256,7 @@ class FoosballParallelEnv(ParallelEnv):
                 ball,
                 act["home"],
                 terminal,
+                self._blocking_joints("home"),
             ),
             "away": self._rewards["away"].step(
                 -outcome.goal,
@@ -252,6 +265,7 @@ class FoosballParallelEnv(ParallelEnv):
                 mirrored,
                 act["away"],
                 terminal,
+                self._blocking_joints("away"),
             ),
         }
         # The single-agent env's info, which has the keys and types of its reset's.
@@ -302,8 +316,19 @@ class FoosballParallelEnv(ParallelEnv):
         game = self._env.game
         for agent, sign in (("home", 1.0), ("away", -1.0)):
             self._rewards[agent].reset(
-                game.positions[self._slides[agent]], [sign * v for v in game.ball], self._n_act
+                game.positions[self._slides[agent]],
+                [sign * v for v in game.ball],
+                self._n_act,
+                self._blocking_joints(agent),
             )
+
+    def _blocking_joints(self, agent: str) -> list[float]:
+        """The slides then the spins of the rods ``agent``'s aim looks past."""
+        rods = self._blocking[agent]
+        if not rods:
+            return []
+        positions, n = self._env.game.positions, len(self._env.layout.rods)
+        return [positions[i] for i in rods] + [positions[n + i] for i in rods]
 
     def _away_info(self, home_info: dict[str, Any]) -> dict[str, Any]:
         """The home side's info as the away side sees it: the score turned round."""
@@ -315,3 +340,11 @@ class FoosballParallelEnv(ParallelEnv):
         )
         info["is_success"] = self._env.task.success(info["goals_for"], info["goals_against"])
         return info
+
+
+def _mirrored(name: str) -> table.Rod:
+    """The rod that the rod called ``name`` is seen as from the other goal: the other team's of
+    the same role (its figurines' y and its x turn round with the team)."""
+    rod = table.rod(name)
+    other = table.AWAY if rod.team == table.HOME else table.HOME
+    return table.rod(f"{other}_{rod.role}")
