@@ -13,11 +13,11 @@ from stable_baselines3.common.callbacks import BaseCallback
 from foosball_gym.evaluation import evaluate
 from foosball_gym.progress import Progress
 from foosball_gym.training.config import TrainConfig
-from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
 from foosball_gym.training.run_dir.best import BestModel
 from foosball_gym.training.run_dir.curve import EVAL_SEED, EvalCurve, eval_row
 from foosball_gym.training.run_dir.files import CHECKPOINT_DIR, MODEL_FILE, write_latest
 from foosball_gym.training.run_dir.storage import save_model
+from foosball_gym.training.sb3.numpy_snapshot import NumpySnapshot
 from foosball_gym.training.sb3.replay import drop_old_replays, write_run_replay
 from foosball_gym.training.signals import Interrupted, SignalStop
 
@@ -79,7 +79,7 @@ class EvalCurveCallback(BaseCallback):
         try:
             with self.stop.interruptible() if self.stop else contextlib.nullcontext():
                 res = evaluate(
-                    PolicySnapshot.of_model(self.model),
+                    NumpySnapshot.of_model(self.model),
                     self.config.env_id,
                     self.config.env_kwargs,
                     episodes=self.config.eval_episodes,

@@ -96,6 +96,10 @@ class NumpyPolicy:
                 x = np.maximum(x, 0)
         return x
 
+    def mean(self, obs: np.ndarray) -> np.ndarray:
+        """The actions' mean (unclipped): what the policy plays deterministically."""
+        return self._forward(self.pi, np.asarray(obs, np.float32))
+
     def value(self, obs: np.ndarray) -> np.ndarray:
         return self._forward(self.vf, np.asarray(obs, np.float32))[..., 0]
 

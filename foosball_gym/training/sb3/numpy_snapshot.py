@@ -1,0 +1,81 @@
+"""A PPO model's policy frozen in NumPy, acting on its mean: what a run's evaluations play.
+
+An evaluation steps one environment at a time, so each step pays for one forward pass of a
+batch of one: SB3's ``predict`` spends most of a step's time in PyTorch's overhead for that, where
+the same small network in NumPy costs a few microseconds. The actions are the mean that
+``predict(deterministic=True)`` gives, to float32 rounding, clipped to the action space.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.vec_env import VecNormalize
+
+from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
+from foosball_gym.training.sb3.worker_rollouts import NumpyPolicy
+
+
+class NumpySnapshot:
+    """A callable from raw observations (one, or a batch) to the policy's mean actions in
+    [-1, 1], normalised as the run's ``VecNormalize`` normalised them when it was made.
+
+    Args:
+        net: the policy's arrays.
+        obs_mean: the running mean of ``VecNormalize`` (None: no normalisation).
+        obs_var: its running variance.
+        clip_obs: its clipping of normalised observations.
+        epsilon: its epsilon under the square root.
+    """
+
+    def __init__(
+        self,
+        net: NumpyPolicy,
+        obs_mean: np.ndarray | None = None,
+        obs_var: np.ndarray | None = None,
+        clip_obs: float = 10.0,
+        epsilon: float = 1e-8,
+    ) -> None:
+        self.net = net
+        self.observation_size = int(net.pi[0][0].shape[0])
+        if (obs_mean is None) != (obs_var is None):
+            raise ValueError("obs_mean and obs_var are given together or not at all")
+        self._normalisation: tuple[np.ndarray, np.ndarray] | None = None
+        if obs_mean is not None and obs_var is not None:
+            self._normalisation = (
+                np.array(obs_mean, dtype=np.float64),
+                np.sqrt(np.array(obs_var, dtype=np.float64) + epsilon),
+            )
+        self._clip_obs = float(clip_obs)
+        self._low = np.maximum(net.low, -1.0)
+        self._high = np.minimum(net.high, 1.0)
+
+    @classmethod
+    def of_model(cls, model: Any) -> NumpySnapshot | PolicySnapshot:
+        """Snapshot ``model``'s policy with its environment's normalisation: in NumPy where it
+        is a plain Gaussian MLP actor-critic (PPO without gSDE), else as a
+        :class:`PolicySnapshot` (SAC, CrossQ, gSDE)."""
+        policy = model.policy
+        if not isinstance(policy, ActorCriticPolicy):
+            return PolicySnapshot.of_model(model)
+        try:
+            net = NumpyPolicy.of(policy, model.action_space)
+        except ValueError:
+            return PolicySnapshot.of_model(model)
+        env = model.get_env()
+        while env is not None and not isinstance(env, VecNormalize):
+            env = getattr(env, "venv", None)
+        if isinstance(env, VecNormalize) and env.norm_obs:
+            assert not isinstance(env.obs_rms, dict)  # the environments observe a Box
+            return cls(net, env.obs_rms.mean, env.obs_rms.var, env.clip_obs, env.epsilon)
+        return cls(net)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        obs = np.asarray(obs, dtype=np.float64)
+        if self._normalisation is not None:
+            mean, scale = self._normalisation
+            obs = np.clip((obs - mean) / scale, -self._clip_obs, self._clip_obs)
+        mean = self.net.mean(obs.astype(np.float32))
+        return np.clip(mean, self._low, self._high).astype(np.float32)
