@@ -147,8 +147,11 @@ class SeenStatistics:
     raw_obs: np.ndarray  # the environments' observations, a leading step axis
     raw_returns: np.ndarray  # the running returns as the statistics took them
     returns: np.ndarray  # the running returns at the end
-    last_raw_obs: np.ndarray
     last_raw_reward: np.ndarray
+
+    @property
+    def last_raw_obs(self) -> np.ndarray:
+        return self.raw_obs[-1]
 
 
 @dataclass
@@ -209,7 +212,7 @@ def play_rollout(envs: DummyVecEnv, plan: RolloutPlan) -> RolloutPart:
         infos.append(info)
     seen = None
     if norm is not None:
-        seen = SeenStatistics(raw_obs, raw_returns, running, raw_obs[-1], norm.old_reward)
+        seen = SeenStatistics(raw_obs, raw_returns, running, norm.old_reward)
     part = (observations, actions, rewards, values, log_probs, dones, infos, np.asarray(obs))
     return RolloutPart(*part, list(envs.reset_infos), seen)
 
