@@ -29,7 +29,7 @@ from foosball_gym.envs.options import (
     SharedOptions,
     check_shared,
 )
-from foosball_gym.envs.rewards import TERMS, RewardComputer
+from foosball_gym.envs.rewards import TERMS, RewardComputer, rod_joints
 from foosball_gym.envs.safety_layer import SafetyLayer
 from foosball_gym.game import Game, Outcome, Policy, portable, unpacked
 from foosball_gym.policy_io.task import TaskInterface, check_action, residual_action
@@ -502,8 +502,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         """The slides then the spins of the rods the ball's aim looks past."""
         if not self._blocking:
             return []
-        positions, n = self.game.positions, len(self.layout.rods)
-        return [positions[i] for i in self._blocking] + [positions[n + i] for i in self._blocking]
+        return rod_joints(self.game.positions, len(self.layout.rods), self._blocking)
 
     def step_info(self, outcome: Outcome, terms: Mapping[str, float]) -> dict[str, Any]:
         """The info of a step that brought ``outcome`` and these reward terms.

@@ -30,6 +30,7 @@ TERMS = (
 )
 # The terms that reward a change of potential.
 POTENTIALS = ("ball_to_goal", "figurine_to_ball", "ball_aim", "ball_lane")
+_NO_POTENTIALS = (0.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -106,6 +107,12 @@ def lane_blockers(rods: Sequence[table.Rod], joints: Sequence[float]) -> list[Bl
     ]
 
 
+def rod_joints(positions: Sequence[float], n_rods: int, indices: Sequence[int]) -> list[float]:
+    """The slides then the spins of the rods at ``indices`` among the ``n_rods`` in play, whose
+    joint values ``positions`` holds, all slides then all spins."""
+    return [positions[i] for i in indices] + [positions[n_rods + i] for i in indices]
+
+
 def ball_aim_potential(
     x: float, y: float, vx: float, vy: float, blockers: Sequence[Blocker] = ()
 ) -> float:
@@ -144,28 +151,29 @@ class RewardComputer:
         self.w = weights
         self.rods = tuple(rods)
         self.blockers = tuple(blockers)
-        self._phi = dict.fromkeys(POTENTIALS, 0.0)
+        # The potentials' weights in POTENTIALS' order, looked up once.
+        self._weights = tuple(getattr(weights, name) for name in POTENTIALS)
+        self._phi = _NO_POTENTIALS
         self._last_action: list[float] | None = None
         self._potential = weights.shaping == "potential"
 
     def _potentials(
         self, slide: Sequence[float], ball: Sequence[float], blocking: Sequence[float]
-    ) -> dict[str, float]:
+    ) -> tuple[float, float, float, float]:
+        """The potentials in POTENTIALS' order (0 where a term is off)."""
         w = self.w
         x, y, vx, vy = ball[:4]
-        phi = dict.fromkeys(POTENTIALS, 0.0)
-        if w.ball_to_goal:
-            phi["ball_to_goal"] = ball_to_goal_potential(x, y)
+        goal = ball_to_goal_potential(x, y) if w.ball_to_goal else 0.0
+        figurine = 0.0
         if w.figurine_to_ball and self.rods:
-            phi["figurine_to_ball"] = figurine_to_ball_potential(
+            figurine = figurine_to_ball_potential(
                 y, [rod.figurine_y(s) for rod, s in zip(self.rods, slide)]
             )
-        if w.ball_aim:
-            phi["ball_aim"] = ball_aim_potential(x, y, vx, vy)
+        aim = ball_aim_potential(x, y, vx, vy) if w.ball_aim else 0.0
+        lane = 0.0
         if w.ball_lane:
-            blockers = lane_blockers(self.blockers, blocking)
-            phi["ball_lane"] = ball_aim_potential(x, y, vx, vy, blockers)
-        return phi
+            lane = ball_aim_potential(x, y, vx, vy, lane_blockers(self.blockers, blocking))
+        return goal, figurine, aim, lane
 
     def reset(
         self,
@@ -193,17 +201,20 @@ class RewardComputer:
         ``blocking`` holds the blockers' slides then spins."""
         w = self.w
         if terminal and self._potential:
-            phi = dict.fromkeys(POTENTIALS, 0.0)
+            phi = _NO_POTENTIALS
         else:
             phi = self._potentials(slide, ball, blocking)
         g = w.gamma if self._potential else 1.0
+        (w_goal, w_fig, w_aim, w_lane), old = self._weights, self._phi
         terms = {
             "goal": w.goal * goal,
             "out_of_table": -w.out_of_table if out_of_table else 0.0,
+            "ball_to_goal": w_goal * (g * phi[0] - old[0]),
+            "figurine_to_ball": w_fig * (g * phi[1] - old[1]),
+            "ball_aim": w_aim * (g * phi[2] - old[2]),
+            "ball_lane": w_lane * (g * phi[3] - old[3]),
+            "action_regularisation": 0.0,
         }
-        for name in POTENTIALS:
-            terms[name] = getattr(w, name) * (g * phi[name] - self._phi[name])
-        terms["action_regularisation"] = 0.0
         if w.action_regularisation:
             last = self._last_action
             if last is None:

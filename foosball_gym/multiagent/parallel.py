@@ -19,7 +19,7 @@ from pettingzoo import ParallelEnv
 from foosball_gym import table
 from foosball_gym.envs.base import RENDER_MODES, FoosballEnv
 from foosball_gym.envs.options import reset_options
-from foosball_gym.envs.rewards import TERMS, RewardComputer
+from foosball_gym.envs.rewards import TERMS, RewardComputer, rod_joints
 from foosball_gym.multiagent.state import TrueState
 from foosball_gym.policy_io.observations import check_flag, mirrored_builder
 from foosball_gym.policy_io.task import check_action
@@ -327,8 +327,7 @@ class FoosballParallelEnv(ParallelEnv):
         rods = self._blocking[agent]
         if not rods:
             return []
-        positions, n = self._env.game.positions, len(self._env.layout.rods)
-        return [positions[i] for i in rods] + [positions[n + i] for i in rods]
+        return rod_joints(self._env.game.positions, len(self._env.layout.rods), rods)
 
     def _away_info(self, home_info: dict[str, Any]) -> dict[str, Any]:
         """The home side's info as the away side sees it: the score turned round."""

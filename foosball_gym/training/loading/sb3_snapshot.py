@@ -109,6 +109,20 @@ def _constructor_parameters(policy: Any) -> dict[str, Any]:
     return {k: v for k, v in parameters.items() if k in accepted}
 
 
+def observation_normalisation(model: Any) -> tuple[np.ndarray, np.ndarray, float, float] | None:
+    """The observation statistics of ``model``'s VecNormalize as they stand: ``(mean, var,
+    clip_obs, epsilon)``; None where its environments are not normalised."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    env = model.get_env()
+    while env is not None and not isinstance(env, VecNormalize):
+        env = getattr(env, "venv", None)
+    if not isinstance(env, VecNormalize) or not env.norm_obs:
+        return None
+    assert not isinstance(env.obs_rms, dict)  # the environments observe a Box
+    return env.obs_rms.mean, env.obs_rms.var, env.clip_obs, env.epsilon
+
+
 class PolicySnapshot:
     """A frozen policy: raw observations in, actions in [-1, 1] out.
 
@@ -167,22 +181,9 @@ class PolicySnapshot:
         cls, model: Any, generation: int = 0, deterministic: bool = True
     ) -> PolicySnapshot:
         """Snapshot ``model``'s policy with the normalisation of its (VecNormalize) env."""
-        from stable_baselines3.common.vec_env import VecNormalize
-
-        env = model.get_env()
-        while env is not None and not isinstance(env, VecNormalize):
-            env = getattr(env, "venv", None)
-        if isinstance(env, VecNormalize) and env.norm_obs:
-            assert not isinstance(env.obs_rms, dict)  # the environments observe a Box
-            return cls(
-                model.policy,
-                env.obs_rms.mean,
-                env.obs_rms.var,
-                env.clip_obs,
-                env.epsilon,
-                generation,
-                deterministic=deterministic,
-            )
+        normalisation = observation_normalisation(model)
+        if normalisation is not None:
+            return cls(model.policy, *normalisation, generation, deterministic=deterministic)
         return cls(model.policy, generation=generation, deterministic=deterministic)
 
     def normalise(self, obs: np.ndarray) -> np.ndarray:

@@ -12,9 +12,8 @@ from typing import Any
 
 import numpy as np
 from stable_baselines3.common.policies import ActorCriticPolicy
-from stable_baselines3.common.vec_env import VecNormalize
 
-from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
+from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot, observation_normalisation
 from foosball_gym.training.sb3.worker_rollouts import NumpyPolicy
 
 
@@ -64,13 +63,8 @@ class NumpySnapshot:
             net = NumpyPolicy.of(policy, model.action_space)
         except ValueError:
             return PolicySnapshot.of_model(model)
-        env = model.get_env()
-        while env is not None and not isinstance(env, VecNormalize):
-            env = getattr(env, "venv", None)
-        if isinstance(env, VecNormalize) and env.norm_obs:
-            assert not isinstance(env.obs_rms, dict)  # the environments observe a Box
-            return cls(net, env.obs_rms.mean, env.obs_rms.var, env.clip_obs, env.epsilon)
-        return cls(net)
+        normalisation = observation_normalisation(model)
+        return cls(net) if normalisation is None else cls(net, *normalisation)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float64)
