@@ -410,7 +410,9 @@ def test_envs_lists_every_environment_with_its_options(capsys):
 
 @needs_hardware
 def test_play_runs_the_scripted_keeper_on_the_simulated_table(capsys):
-    argv = ["play", "scripted", "--env", "Foosball-Block-v0", "--table", "sim"]
+    # Lock-step: on the wall clock the suite's other worker can hold this process past the
+    # watchdog, which stops the table as it should (tests/test_play.py covers that clock).
+    argv = ["play", "scripted", "--env", "Foosball-Block-v0", "--table", "sim", "--lockstep"]
     assert main([*argv, "--episodes", "1", "--camera", "320x180", "--no-status"]) == 0
     out = capsys.readouterr().out
     assert "1 episodes of Foosball-Block-v0: success" in out
