@@ -111,6 +111,15 @@ TASKS = {
         (500_000, 1_000_000, 2_000_000, 4_000_000, 6_000_000),
         ("--env-kwarg", "ball_aim_weight=300", "--worker-rollouts", "--timesteps", "6000000"),
     ),
+    # The same with an entropy bonus, which kept the policy exploring where two seeds stalled
+    # (development runs 13 and 13a).
+    "score-incoming-aim-entropy": Task(
+        "Foosball-Score-v0",
+        "builtin:score-incoming-scratch",
+        (500_000, 1_000_000, 2_000_000, 4_000_000, 6_000_000),
+        ("--env-kwarg", "ball_aim_weight=300", "--worker-rollouts", "--timesteps", "6000000")
+        + ("--ent-coef", "0.01"),
+    ),
     "score-obstacles": Task(
         "Foosball-Score-v0",
         "builtin:score-obstacles-scratch",
