@@ -24,6 +24,7 @@ import shlex
 import subprocess
 import sys
 import tempfile
+import textwrap
 import time
 import warnings
 from dataclasses import dataclass
@@ -333,9 +334,12 @@ def _plot(table: dict[tuple[str, int], dict], rows: list[dict[str, str]], images
             label = "each seed" if n == 0 else None
             ax.plot(*zip(*mine), color="grey", lw=0.7, alpha=0.6, label=label)
         ax.set_xscale("log")
+        # The budgets themselves, written short: log-scale minor ticks crowd one another.
+        ax.set_xticks(steps, [_short(s) for s in steps])
+        ax.minorticks_off()
         ax.set_xlabel("env steps")
         ax.set_ylabel(f"success, {EVAL_EPISODES} episodes (%)")
-        ax.set_title(f"{task}: {TASKS[task].recipe}" if task in TASKS else task)
+        ax.set_title(_title(task), fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(loc="lower right", fontsize=8)
         fig.tight_layout()
@@ -343,6 +347,18 @@ def _plot(table: dict[tuple[str, int], dict], rows: list[dict[str, str]], images
         fig.savefig(path, dpi=110)
         plt.close(fig)
         print(f"wrote {path}")
+
+
+def _short(steps: int) -> str:
+    return f"{steps / 1e6:g}M" if steps >= 1_000_000 else f"{steps // 1000}k"
+
+
+def _title(task: str) -> str:
+    """The task and the whole command line of its recipe, wrapped to fit the plot."""
+    if task not in TASKS:
+        return task
+    recipe = " ".join((TASKS[task].recipe, *TASKS[task].options))
+    return "\n".join(textwrap.wrap(f"{task}: {recipe}", 70))
 
 
 def _seeds(text: str) -> list[int]:

@@ -96,6 +96,7 @@ SHIPPED_TASKS = [
 
 RECIPES = [
     "block-scratch",
+    "score-incoming-aim-scratch",
     "score-incoming-scratch",
     "score-obstacles-scratch",
     "score-resting-scratch",
@@ -142,6 +143,16 @@ def test_a_from_scratch_recipe_has_no_demonstrations_teacher_or_residual(name):
     assert config.pretrain_episodes == 0 and config.teacher_steps == 0
     assert not config.env_kwargs.get("residual")
     assert not config.self_play
+
+
+def test_the_incoming_aim_recipe_is_the_settings_its_baselines_rows_were_trained_with():
+    # scripts/baselines.py's task score-incoming-aim-entropy: the incoming recipe and options.
+    options = ["--env-kwarg", "ball_aim_weight=300", "--worker-rollouts", "--ent-coef", "0.01"]
+    given = ["--config", "builtin:score-incoming-scratch", *options, "--timesteps", "6000000"]
+    trained = config_of(["Foosball-Score-v0", *given])
+    shipped = config_of(["Foosball-Score-v0", "--config", "builtin:score-incoming-aim-scratch"])
+    assert shipped == trained
+    assert shipped != config_of(["Foosball-Score-v0", *given[:-2]])
 
 
 @pytest.mark.parametrize("env_id", SHIPPED_TASKS)
