@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 
 import gymnasium as gym
+import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
@@ -115,6 +116,45 @@ def test_score_obstacle_positions_are_appended_after_the_ball(make_env):
     assert obs[-3:] == pytest.approx([0.1, -0.05, 0.02], abs=2e-3)
 
 
+def straight_shot(env, **options) -> bool:
+    """Whether a ball shot straight down the middle at the away goal goes in."""
+    start = {"ball_position": (-0.40, 0.0), "ball_velocity": (4.0, 0.0)}
+    env.reset(seed=0, options={**start, **options})
+    while True:
+        _, _, terminated, truncated, info = env.step([0.0, 0.0])
+        if terminated or truncated:
+            return bool(info["is_success"])
+
+
+def test_obstacle_rods_not_standing_are_spun_up_and_let_the_ball_pass(make_env):
+    centred = {"obstacle_positions": (0.0, 0.0, 0.0)}  # a figurine of each on the middle line
+    standing = make_env("Foosball-Score-v0", obstacles=True)
+    assert not straight_shot(standing, **centred)
+    assert list(standing.unwrapped.game.positions[5:8]) == pytest.approx([0.0] * 3, abs=0.05)
+    up = make_env("Foosball-Score-v0", obstacles=True, obstacle_share=0.0)
+    assert straight_shot(up, **centred)
+    # Held a quarter turn up the whole way, their slides observed as the standing rods' are.
+    assert list(up.unwrapped.game.positions[5:8]) == pytest.approx([np.pi / 2] * 3, abs=0.05)
+    assert up.unwrapped.obs_builder.names == standing.unwrapped.obs_builder.names
+
+
+def test_each_obstacle_rod_stands_with_the_obstacle_share_and_all_do_by_default(make_env):
+    env = make_env("Foosball-Score-v0", obstacles=True, obstacle_share=0.5)
+    spins = []
+    for seed in range(100):
+        env.reset(seed=seed)
+        spins += list(env.unwrapped.game.positions[5:8])
+    standing = sum(abs(s) < 0.1 for s in spins)
+    assert sum(abs(s - np.pi / 2) < 0.1 for s in spins) == 300 - standing
+    assert 120 <= standing <= 180  # 300 rods at one chance in two: 150 ± 3.5 sigma
+    # The default, 1, draws nothing more: the task's own episodes, seed for seed.
+    default = make_env("Foosball-Score-v0", obstacles=True)
+    every = make_env("Foosball-Score-v0", obstacles=True, obstacle_share=1.0)
+    for seed in range(5):
+        assert default.reset(seed=seed)[0] == pytest.approx(every.reset(seed=seed)[0])
+        assert list(every.unwrapped.game.positions[5:8]) == [0.0] * 3
+
+
 def test_figurine_observation_follows_the_rod(make_env):
     env = make_env("Foosball-Block-v0", observe_figurines=True)
     obs, _ = env.reset(options={"ball_position": (0.3, 0.2), "ball_velocity": (0.0, 0.0)})
@@ -136,6 +176,8 @@ def test_figurine_observation_follows_the_rod(make_env):
     [
         ("Foosball-Score-v0", {"ball_start": "flying"}, "resting, incoming"),
         ("Foosball-Score-v0", {"obstacles": "yes"}, "True or False"),
+        ("Foosball-Score-v0", {"obstacles": True, "obstacle_share": 1.5}, "obstacle_share"),
+        ("Foosball-Score-v0", {"obstacle_share": 0.5}, "obstacle_share 0.5 needs obstacles=True"),
         ("Foosball-Block-v0", {"opponent_prismatic_only": True}, "only to tasks with an opponent"),
         ("Foosball-FullGame-v0", {"continuous": 1}, "True or False"),
         ("Foosball-KeeperVsKeeper-v0", {"stagnation_steps": -1}, "non-negative"),

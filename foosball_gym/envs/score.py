@@ -60,6 +60,10 @@ class ScoreEnv(FoosballEnv):
     - `ball_start`: how the ball starts: `"resting"` in front of the keeper, or
       `"incoming"`, shot at the home goal.
     - `obstacles`: put the away keeper, defense and offense in the way, still.
+    - `obstacle_share`: with obstacles, the chance, in [0, 1], that each of the three rods
+      stands in the ball's way at a reset; the others are spun up a quarter turn, their
+      figurines level above the ball (a curriculum over the rods: the observation still
+      gives their slides).
     - `speed_range`: the incoming shots' speeds in m/s, `(low, high)`, drawn uniformly; at
       most 20, the fastest ball the table is built for.
     - `serve_x_range`: where along the table an incoming ball starts, `(low, high)` in m,
@@ -94,6 +98,7 @@ class ScoreEnv(FoosballEnv):
       `rod_angle_noise`, and `camera_noise`'s `latency_jitter_s`.
     - v0: `safety_layer`, on by default with `estimated_state`: an environment on estimated
       state plays like `foosball play`, its targets shaped by the real table's safety layer.
+    - v0: `obstacle_share`, 1 by default (episodes as before, seed for seed).
     """
 
     # The authors' scoring tasks regularise the action.
@@ -104,6 +109,7 @@ class ScoreEnv(FoosballEnv):
         *,
         ball_start: Literal["resting", "incoming"] = "resting",
         obstacles: bool = False,
+        obstacle_share: float = 1.0,
         speed_range: tuple[float, float] = (3.0, 7.0),
         serve_x_range: tuple[float, float] = (0.0, 0.4),
         serve_y_range: tuple[float, float] = (-0.3, 0.3),
@@ -118,6 +124,7 @@ class ScoreEnv(FoosballEnv):
             ScoreTask(
                 ball_start=ball_start,
                 obstacles=obstacles,
+                obstacle_share=obstacle_share,
                 speed_range=speed_range,
                 serve_x_range=serve_x_range,
                 serve_y_range=serve_y_range,

@@ -13,10 +13,12 @@ from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.observations import check_flag
 from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import GAP_Y, REACH_X, Start, Task, figurine_at_ball
-from foosball_gym.tasks.serves import Shots, check_choice, resting_in_front_of
+from foosball_gym.tasks.serves import Shots, check_choice, check_share, resting_in_front_of
 
 BALL_STARTS = ("resting", "incoming")
 OBSTACLES = ("away_keeper", "away_defense", "away_offense")
+# A quarter turn holds a rod's figurines level, their soles well above the ball.
+SPUN_UP = float(np.pi / 2)
 
 
 class ScoreTask(Task):
@@ -29,6 +31,7 @@ class ScoreTask(Task):
         *,
         ball_start: Literal["resting", "incoming"] = "resting",
         obstacles: bool = False,
+        obstacle_share: float = 1.0,
         speed_range: tuple[float, float] = (3.0, 7.0),
         serve_x_range: tuple[float, float] = (0.0, 0.4),
         serve_y_range: tuple[float, float] = (-0.3, 0.3),
@@ -40,6 +43,12 @@ class ScoreTask(Task):
     ) -> None:
         self.ball_start = check_choice("ball_start", ball_start, BALL_STARTS)
         self.obstacles = check_flag("obstacles", obstacles)
+        self.obstacle_share = check_share("obstacle_share", obstacle_share)
+        if self.obstacle_share != 1.0 and not self.obstacles:
+            raise ValueError(
+                f"obstacle_share {obstacle_share!r} needs obstacles=True: it is the chance that "
+                "each obstacle rod stands in the ball's way"
+            )
         self.shots = Shots.checked(
             speed_range,
             serve_x_range,
@@ -72,16 +81,28 @@ class ScoreTask(Task):
         if ball_velocity is not None:
             velocity = ball_velocity
         slide = [0.0]
+        spin = [0.0]
         if self.obstacles:
             given = options.get("obstacle_positions")
             slide += self._obstacle_positions(rng, given)
+            # No draw at a share of 1, so that the task's own episodes stay as they were.
+            standing = (
+                [True] * len(OBSTACLES)
+                if self.obstacle_share == 1.0
+                else list(rng.random(len(OBSTACLES)) < self.obstacle_share)
+            )
+            spin += [0.0 if up else SPUN_UP for up in standing]
             if given is not None:
                 # The game slides a figurine that would start inside the ball; one the user
                 # placed stays where it was put, so the ball may not start against it.
-                self._check_clear(slide[1:], position)
+                self._check_clear(
+                    [s for s, up in zip(slide[1:], standing) if up],
+                    position,
+                    [n for n, up in zip(OBSTACLES, standing) if up],
+                )
         elif options.get("obstacle_positions") is not None:
             raise ValueError("obstacle_positions needs obstacles=True")
-        return Start(slide, [0.0] * len(slide), position, velocity)
+        return Start(slide, spin, position, velocity)
 
     @staticmethod
     def _obstacle_positions(rng: np.random.Generator, given: Any) -> list[float]:
@@ -103,8 +124,10 @@ class ScoreTask(Task):
         return values
 
     @staticmethod
-    def _check_clear(slides: list[float], ball: tuple[float, float]) -> None:
-        for name, slide in zip(OBSTACLES, slides):
+    def _check_clear(
+        slides: list[float], ball: tuple[float, float], names: Sequence[str] = OBSTACLES
+    ) -> None:
+        for name, slide in zip(names, slides):
             rod = table.rod(name)
             k = figurine_at_ball(rod, slide, ball)
             if k is not None:
