@@ -55,6 +55,56 @@ def test_serves_that_cannot_change_are_refused(env_id, kwargs, options, message)
         env.close()
 
 
+def standing_obstacles(env: gym.Env, episodes: int) -> int:
+    """How many obstacle rods stood in the ball's way over ``episodes`` resets."""
+    spins = []
+    for seed in range(episodes):
+        env.reset(seed=seed)
+        spins += list(env.unwrapped.game.positions[5:8])  # the three obstacle rods' spins
+    return sum(abs(s) < 0.1 for s in spins)
+
+
+def test_the_obstacle_share_changes_from_the_next_reset_on():
+    env = gym.make("Foosball-Score-v0", obstacles=True)
+    try:
+        assert standing_obstacles(env, 5) == 15
+        env.unwrapped.set_serves(obstacle_share=0.0)
+        assert standing_obstacles(env, 5) == 0
+        with pytest.raises(ValueError, match=r"obstacle_share must be a number in \[0, 1\]"):
+            env.unwrapped.set_serves(obstacle_share=2.0)
+        # Nothing changes where an option is refused.
+        with pytest.raises(ValueError, match="serves no shots"):
+            env.unwrapped.set_serves(obstacle_share=1.0, speed_range=(1, 2))
+        assert standing_obstacles(env, 5) == 0
+    finally:
+        env.close()
+    plain = gym.make("Foosball-Score-v0")
+    try:
+        with pytest.raises(ValueError, match="obstacle_share needs obstacles=True"):
+            plain.unwrapped.set_serves(obstacle_share=0.5)
+    finally:
+        plain.close()
+
+
+def test_a_curriculum_over_the_obstacles_ends_at_the_runs_own_share():
+    from foosball_gym.training.curriculum import run_serves
+
+    kwargs = {"obstacles": True, "obstacle_share": 0.8}
+    config = TrainConfig(
+        "Foosball-Score-v0", kwargs, curriculum={"obstacle_share": 0.0}, curriculum_steps=10
+    )
+    config.check()
+    assert run_serves("Foosball-Score-v0", kwargs, ["obstacle_share"]) == {"obstacle_share": 0.8}
+    for start, message in [
+        ({"obstacle_share": [0, 1]}, "a number"),
+        ({"obstacle_share": -0.5}, "obstacle_share must be a number in"),
+        ({"speed_range": [1, 2]}, "unknown serve option 'speed_range'; allowed here: obstacle_"),
+    ]:
+        config = TrainConfig("Foosball-Score-v0", kwargs, curriculum=start, curriculum_steps=10)
+        with pytest.raises(ValueError, match=message):
+            config.check()
+
+
 def test_the_serves_move_in_a_straight_line_and_then_stay():
     start = {"speed_range": (1.0, 2.0), "bank_share": 0.0}
     end = {"speed_range": (3.0, 7.0), "bank_share": 0.5}

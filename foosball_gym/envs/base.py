@@ -316,12 +316,13 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     def set_serves(self, **options: Any) -> None:
         """Change the incoming shots' options (``speed_range``, ``serve_x_range``,
         ``serve_y_range``, ``bank_share``, ``double_bank_share``, ``beside_mouth``,
-        ``rebound_share``) from the next reset on, checked as the constructor checks them: a
-        curriculum over serves (``TrainConfig.curriculum``).
+        ``rebound_share``; Score with obstacles its ``obstacle_share``) from the next reset
+        on, checked as the constructor checks them: a curriculum over serves
+        (``TrainConfig.curriculum``).
 
         Raises:
-            ValueError: the task serves no shots (Score with the ball at rest, the games), or
-                an option is unknown or out of range.
+            ValueError: the task has no such options (Score with the ball at rest and no
+                obstacles, the games), or an option is unknown or out of range.
         """
         self.task.set_serves(**options)
 

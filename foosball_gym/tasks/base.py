@@ -153,6 +153,12 @@ class Task:
         """The shots the task serves its episodes from, if it serves shots."""
         return None
 
+    def serve_options(self) -> dict[str, Any]:
+        """The options :meth:`set_serves` can change, by the names the environments take,
+        with their values now: a curriculum moves them (empty where there are none)."""
+        shots = self.served_shots()
+        return {} if shots is None else shots.options()
+
     def set_serves(self, **options: Any) -> None:
         """Change serve options (``speed_range``, ``serve_x_range``, ...: those of
         ``serves.SERVE_FIELDS``) for the episodes from the next reset on.
@@ -164,7 +170,8 @@ class Task:
         if shots is None:
             raise ValueError(
                 f"{type(self).__name__.removesuffix('Task')} with these options serves no shots "
-                "whose options could change (Block does, and Score with ball_start='incoming')"
+                "whose options could change (Block does, and Score with ball_start='incoming'; "
+                "Score with obstacles=True changes only its obstacle_share)"
             )
         self.shots = shots.changed(**options)
 

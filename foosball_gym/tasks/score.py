@@ -142,6 +142,23 @@ class ScoreTask(Task):
     def served_shots(self) -> Shots | None:
         return self.shots if self.ball_start == "incoming" else None
 
+    def serve_options(self) -> dict[str, Any]:
+        own = super().serve_options()
+        return {**own, "obstacle_share": self.obstacle_share} if self.obstacles else own
+
+    def set_serves(self, **options: Any) -> None:
+        """As :meth:`Task.set_serves`, and with obstacles ``obstacle_share`` too."""
+        if "obstacle_share" not in options:
+            super().set_serves(**options)
+            return
+        if not self.obstacles:
+            raise ValueError("obstacle_share needs obstacles=True")
+        # Every value checked before any changes.
+        share = check_share("obstacle_share", options.pop("obstacle_share"))
+        if options:
+            super().set_serves(**options)
+        self.obstacle_share = share
+
     def scripted_policy(self, names: Sequence[str], precise_state: bool = True) -> ScriptedTeam:
         """The scripted keeper, deflecting incoming balls to the goal (or striking them where
         it cannot: blocked ones trickle out of reach) and aiming past the obstacles.

@@ -1,9 +1,10 @@
 """A curriculum over serves: a run's incoming shots start easier and become the task's own.
 
-``TrainConfig.curriculum`` names serve options (``speed_range``, ``serve_x_range``, ...) with
-the values the run starts from; over its first ``curriculum_steps`` steps each moves in a
-straight line to the run's own value (its ``env_kwargs``', or the environment's default), and
-stays there. Needs no simulator: the values are checked as the environment checks them.
+``TrainConfig.curriculum`` names serve options (``speed_range``, ``serve_x_range``, ...;
+Score with obstacles its ``obstacle_share``) with the values the run starts from; over its
+first ``curriculum_steps`` steps each moves in a straight line to the run's own value (its
+``env_kwargs``', or the environment's default), and stays there. Needs no simulator: the values
+are checked as the environment checks them.
 """
 
 from __future__ import annotations
@@ -12,13 +13,13 @@ from collections.abc import Mapping
 from typing import Any
 
 from foosball_gym.registration import check_env_options
-from foosball_gym.tasks.serves import Shots
+from foosball_gym.tasks.base import Task
 
 
 def run_serves(env_id: str, env_kwargs: Mapping[str, Any], names: list[str]) -> dict[str, Any]:
     """The serve options ``names`` (checked: :func:`check_curriculum`) as the run's environment
     has them: where a curriculum ends."""
-    own = _shots(env_id, env_kwargs).options()
+    own = _task(env_id, env_kwargs).serve_options()
     return {name: own[name] for name in names}
 
 
@@ -41,12 +42,17 @@ def check_curriculum(
         )
     if not start:
         return
-    shots = _shots(env_id, env_kwargs)
+    task = _task(env_id, env_kwargs)
+    own = task.serve_options()
+    unknown = sorted(set(start) - set(own))
+    if unknown:
+        raise ValueError(
+            f"curriculum: unknown serve option {unknown[0]!r}; allowed here: {', '.join(own)}"
+        )
     try:
-        shots.changed(**start)
+        task.set_serves(**start)
     except ValueError as e:
         raise ValueError(f"curriculum: {e}") from None
-    own = shots.options()
     for name, first in start.items():
         if _is_pair(own[name]) != _is_pair(first):
             raise ValueError(
@@ -72,13 +78,11 @@ def serves_at(start: Mapping[str, Any], end: Mapping[str, Any], fraction: float)
     return values
 
 
-def _shots(env_id: str, env_kwargs: Mapping[str, Any]) -> Shots:
+def _task(env_id: str, env_kwargs: Mapping[str, Any]) -> Task:
     task = check_env_options(env_id, env_kwargs).task
-    shots = task.served_shots()
-    if shots is None:
+    if not task.serve_options():
         task.set_serves()  # raises, saying which tasks serve shots
-    assert shots is not None
-    return shots
+    return task
 
 
 def _is_pair(value: Any) -> bool:
