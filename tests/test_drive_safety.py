@@ -325,12 +325,27 @@ def _ctrl_c(table: RealTimeTable) -> type[BaseException]:
     raise KeyboardInterrupt
 
 
+def swinging(realtime_table) -> RealTimeTable:
+    """A table 150 ms into a swing, both rods moving fast. On the wall clock the suite's other
+    worker can hold this process past the watchdog before the stop under test (it did once,
+    99.4 ms against 50 ms), which stops the table as it should: then once more on a new table.
+    Once is the machine; twice in a row is the stack."""
+    for attempt in (1, 2):
+        table = realtime_table()
+        try:
+            table.drives.bring_up()
+            play(table.drives, 9)
+            return table
+        except WatchdogTripped:
+            if attempt == 2:
+                raise
+    raise AssertionError("unreachable")
+
+
 @pytest.mark.parametrize("cause", [_fault, _watchdog, _stop, _ctrl_c], ids=lambda f: f.__name__[1:])
 def test_every_stop_brakes_to_standstill_before_the_power_goes_off(realtime_table, cause):
-    table = realtime_table()
+    table = swinging(realtime_table)
     drives = table.drives
-    drives.bring_up()
-    play(drives, 9)  # 150 ms into a swing: both rods moving fast
     started = time.monotonic()
     with contextlib.suppress(DriveFault, WatchdogTripped, KeyboardInterrupt), drives:
         cause(table)
