@@ -1,7 +1,8 @@
 """worker_rollouts: each process that steps environments plays its share's whole rollout with a
 copy of the policy. The rollout it fills is SB3's own (same observations, actions, rewards,
 values, advantages and statistics where the noise is the same), the policy's copy is the policy,
-a run with it trains, resumes and loads as any other, and what it cannot play is refused."""
+a run with it trains, resumes and loads as any other, and what it cannot play is refused. In
+self-play the workers play the opponents too, the same whatever the split."""
 
 from __future__ import annotations
 
@@ -20,9 +21,15 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList  # noq
 from foosball_gym.cli import main  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
 from foosball_gym.training.loading.sb3_load import sb3_objects  # noqa: E402
+from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot  # noqa: E402
 from foosball_gym.training.sb3.model import RolloutPPO, build_model  # noqa: E402
+from foosball_gym.training.sb3.numpy_snapshot import NumpySnapshot  # noqa: E402
 from foosball_gym.training.sb3.vec_env import make_env  # noqa: E402
 from foosball_gym.training.sb3.worker_rollouts import NumpyPolicy  # noqa: E402
+from foosball_gym.training.selfplay.opponents import (  # noqa: E402
+    AGAINST_ANCHOR,
+    find_selfplay_env,
+)
 
 
 def _model(config: TrainConfig) -> tuple[object, object]:
@@ -202,6 +209,108 @@ def test_what_worker_rollouts_cannot_play_is_refused(bad, message):
         TrainConfig("Foosball-Block-v0", worker_rollouts=True, **bad).check()
 
 
-def test_worker_rollouts_with_self_play_is_refused():
-    with pytest.raises(ValueError, match="self-play chooses its opponents' actions"):
-        TrainConfig("Foosball-KeeperVsKeeper-v0", worker_rollouts=True).check()
+@pytest.mark.parametrize(
+    ("bad", "message"),
+    [
+        ({"env_kwargs": {"residual": 0.5}}, "a residual learner's snapshots give corrections"),
+        ({"selfplay_sampled": True}, "selfplay_sampled's draws are made in the training"),
+    ],
+)
+def test_what_worker_rollouts_cannot_play_in_self_play_is_refused(bad, message):
+    config = TrainConfig("Foosball-KeeperVsKeeper-v0", self_play=True, **bad)
+    config.check()
+    assert config.worker_rollouts is False  # the default leaves it off
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(
+            "Foosball-KeeperVsKeeper-v0", self_play=True, worker_rollouts=True, **bad
+        ).check()
+
+
+def test_self_play_plays_its_rollouts_in_the_workers_by_default():
+    config = TrainConfig("Foosball-FullGame-v0", self_play=True)
+    config.check()
+    assert config.worker_rollouts is True
+
+
+def _self_play(vec_env: str, workers: bool, **kwargs: object) -> tuple[list[np.ndarray], int]:
+    """One rollout of keeper against keeper, the policy's noise turned down: the buffer, the
+    opponents assigned at its end, and the games that ended against a scripted anchor."""
+    config = TrainConfig(
+        "Foosball-KeeperVsKeeper-v0",
+        n_envs=4,
+        n_steps=200,
+        batch_size=100,
+        seed=3,
+        vec_env=vec_env,
+        self_play=True,
+        worker_rollouts=workers,
+        normalize=False,
+        normalize_reward=False,
+        learner="torch",
+        env_kwargs={"stagnation_steps": 60},  # a still ball ends the game in a second
+        **kwargs,
+    )
+    model, venv = _model(config)
+    anchored = []
+
+    class Count(BaseCallback):
+        def _on_step(self) -> bool:
+            for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
+                anchored.append(bool(done and info.get(AGAINST_ANCHOR)))
+            return True
+
+    try:
+        model._setup_learn(800, CallbackList([]))
+        _quiet(model)
+        selfplay = find_selfplay_env(venv)
+        if kwargs.get("selfplay_pool"):
+            with th.no_grad():  # a snapshot that moves, of a policy that is not the learner's
+                for p in model.policy.parameters():
+                    p.add_(th.linspace(-0.5, 0.5, p.numel()).reshape(p.shape))
+            selfplay.set_pool([PolicySnapshot.of_model(model)])
+            _quiet(model)
+        callback = CallbackList([Count()])
+        callback.init_callback(model)
+        assert model.collect_rollouts(venv, callback, model.rollout_buffer, model.n_steps)
+        buf = model.rollout_buffer
+        arrays = [buf.observations, buf.actions, buf.rewards, buf.episode_starts, buf.advantages]
+        return [*arrays, model._last_obs, selfplay._assigned.copy()], sum(anchored)
+    finally:
+        venv.close()
+
+
+def test_a_self_play_rollout_played_in_the_workers_is_the_one_sb3_plays():
+    # The first opponent holds still, so both loops face the same one.
+    (sb3, _), (ours, _) = (_self_play("batched", workers) for workers in (False, True))
+    assert sb3[3][1:].sum() >= 2  # games ended within the rollout
+    for expected, got in zip(sb3, ours, strict=True):
+        np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-4)
+
+
+def test_self_play_in_the_workers_does_not_depend_on_the_split():
+    # A snapshot in the pool and two rungs of the ladder drawn for half of the games.
+    mixed = dict(selfplay_pool=1, selfplay_scripted_share=0.5, selfplay_scripted_levels=(0, 1))
+    (batched, anchored), (alone, anchored_alone) = (
+        _self_play(vec_env, True, **mixed) for vec_env in ("batched", "dummy")
+    )
+    assert batched[3][1:].sum() >= 2
+    assert anchored == anchored_alone >= 1  # games against an anchor were counted as such
+    for expected, got in zip(alone, batched, strict=True):
+        np.testing.assert_array_equal(got, expected)
+
+
+def test_a_snapshot_in_numpy_acts_as_the_snapshot():
+    model, venv = _model(
+        TrainConfig("Foosball-KeeperVsKeeper-v0", n_envs=1, batch_size=128, vec_env="dummy")
+    )
+    try:
+        venv.obs_rms.mean[:], venv.obs_rms.var[:] = 0.2, 3.0
+        snapshot = PolicySnapshot.of_model(model)
+        copy = NumpySnapshot.of_snapshot(snapshot)
+        assert isinstance(copy, NumpySnapshot)
+        obs = np.random.default_rng(0).normal(size=(6, *model.observation_space.shape)) * 3
+        np.testing.assert_allclose(copy(obs), snapshot(obs), atol=1e-5)
+        sampling = PolicySnapshot.of_model(model, deterministic=False)
+        assert NumpySnapshot.of_snapshot(sampling) is sampling  # its draws are PyTorch's
+    finally:
+        venv.close()

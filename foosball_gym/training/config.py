@@ -113,7 +113,8 @@ class TrainConfig:
         None,
         "PPO: each process that steps environments plays its share's whole rollout with a "
         "copy of the policy, one message a rollout instead of one a step (None: on where it "
-        "can, PPO without gSDE or self-play, vec_env batched or dummy)",
+        "can, PPO without gSDE, vec_env batched or dummy, self-play neither residual nor "
+        "sampled)",
     )
     adam_eps: float | None = _field(
         1e-8, "Adam's epsilon (None: SB3's own, 1e-5 for PPO; PyTorch's default is 1e-8)"
@@ -400,19 +401,26 @@ class TrainConfig:
 
     def _check_worker_rollouts(self) -> None:
         """Resolve worker_rollouts' default; refuse it where it was asked for and cannot play."""
+        residual = self.self_play and bool(self.env_kwargs.get("residual"))
         if self.worker_rollouts is None:
             self.worker_rollouts = (
                 self.algo == "ppo"
                 and not self.use_sde
-                and not self.self_play
+                and not (self.self_play and (residual or self.selfplay_sampled))
                 and self.vec_env != "subproc"
             )
         if not self.worker_rollouts:
             return
-        if self.self_play:
+        if residual:
             raise ValueError(
-                "worker_rollouts plays the learner alone in each worker; self-play chooses its "
-                "opponents' actions in the training process: leave worker_rollouts off"
+                "worker_rollouts plays self-play's snapshots as they are; a residual learner's "
+                "snapshots give corrections, made whole in the training process: leave "
+                "worker_rollouts off"
+            )
+        if self.self_play and self.selfplay_sampled:
+            raise ValueError(
+                "worker_rollouts plays self-play's snapshots on their mean; selfplay_sampled's "
+                "draws are made in the training process: leave one of them off"
             )
         if self.algo != "ppo":
             raise ValueError(

@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from gymnasium import spaces
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot, observation_normalisation
@@ -65,6 +66,23 @@ class NumpySnapshot:
             return PolicySnapshot.of_model(model)
         normalisation = observation_normalisation(model)
         return cls(net) if normalisation is None else cls(net, *normalisation)
+
+    @classmethod
+    def of_snapshot(cls, snapshot: Any) -> Any:
+        """``snapshot`` (a :class:`PolicySnapshot`) in NumPy where it acts on a plain Gaussian
+        MLP's mean; anything else as it is."""
+        if not isinstance(snapshot, PolicySnapshot) or not snapshot.deterministic:
+            return snapshot
+        policy = snapshot.policy
+        if not isinstance(policy, ActorCriticPolicy):
+            return snapshot
+        try:
+            net = NumpyPolicy.of(policy, spaces.Box(-1.0, 1.0, policy.action_space.shape))
+        except ValueError:
+            return snapshot
+        if snapshot.obs_mean is None:
+            return cls(net)
+        return cls(net, snapshot.obs_mean, snapshot.obs_var, snapshot.clip_obs, snapshot.epsilon)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float64)

@@ -7,7 +7,6 @@ import signal
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
@@ -17,7 +16,11 @@ from foosball_gym.training.config import VEC_ENV_KINDS, TrainConfig
 from foosball_gym.training.loading.loader import whole_action_policy
 from foosball_gym.training.sb3.batched_vec_env import BatchedSubprocVecEnv, default_workers
 from foosball_gym.training.sb3.in_process_vec_env import InProcessVecEnv
-from foosball_gym.training.selfplay.opponents import OpponentActionWrapper, SelfPlayVecEnv
+from foosball_gym.training.selfplay.opponents import (
+    OpponentActionWrapper,
+    SelfPlayVecEnv,
+    StillOpponent,
+)
 
 
 def _ignoring_sigint(env_fn: Callable[[], Any]) -> Callable[[], Any]:
@@ -83,7 +86,7 @@ def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
 
         venv = SelfPlayVecEnv(
             venv,
-            lambda obs: np.zeros((len(obs), n), np.float32),
+            StillOpponent(n),
             config.seed,
             anchor=anchor,
             anchor_share=config.selfplay_scripted_share,

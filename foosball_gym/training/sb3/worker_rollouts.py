@@ -24,6 +24,11 @@ updates them every step); and the callbacks run once the rollout is played, so a
 mid-rollout comes after the environments have played it. Neither the noise nor the
 normalisation depends on how the environments are split, so a seeded run trains the same policy
 with its environments batched over the cores or all in one process.
+
+In self-play each share also plays its environments' opponents (a copy of the run's
+:class:`~foosball_gym.training.selfplay.opponents.SelfPlayVecEnv`, the snapshots in NumPy where
+they act on their mean), and each environment draws its next opponent with a generator of its
+own. A new opponent the self-play callback picks plays from the next rollout on.
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 
 from foosball_gym.training.sb3.mlp_layers import mlp_layers
+from foosball_gym.training.selfplay.opponents import OpponentPlan, OpponentState, SelfPlayVecEnv
 
 _HALF_LOG_2PI = np.float32(0.5 * np.log(2 * np.pi))
 
@@ -138,6 +144,7 @@ class RolloutPlan:
     total: int  # the run's environments
     normalisation: bytes | None
     returns: np.ndarray | None
+    opponents: OpponentPlan | None = None  # self-play's, for the share
 
 
 @dataclass
@@ -168,15 +175,17 @@ class RolloutPart:
     last_obs: np.ndarray
     reset_infos: list[dict[str, Any]]
     seen: SeenStatistics | None
+    opponents: OpponentState | None = None
 
 
 def play_rollout(envs: DummyVecEnv, plan: RolloutPlan) -> RolloutPart:
     """Play ``plan`` on ``envs`` (a share of the run's environments, unnormalised)."""
     norm: VecNormalize | None = None
-    stepped: VecEnv = envs
+    selfplay = None if plan.opponents is None else SelfPlayVecEnv.playing(envs, plan.opponents)
+    stepped: VecEnv = envs if selfplay is None else selfplay
     if plan.normalisation is not None:
         norm = pickle.loads(plan.normalisation)
-        norm.set_venv(envs)
+        norm.set_venv(stepped)
         learning, norm.training = norm.training, False  # the start's statistics throughout
         running = np.array(plan.returns, dtype=np.float64)
         stepped = norm
@@ -214,7 +223,8 @@ def play_rollout(envs: DummyVecEnv, plan: RolloutPlan) -> RolloutPart:
     if norm is not None:
         seen = SeenStatistics(raw_obs, raw_returns, running, norm.old_reward)
     part = (observations, actions, rewards, values, log_probs, dones, infos, np.asarray(obs))
-    return RolloutPart(*part, list(envs.reset_infos), seen)
+    opponents = None if selfplay is None else selfplay.state()
+    return RolloutPart(*part, list(envs.reset_infos), seen, opponents)
 
 
 class WorkerRollouts:
@@ -228,6 +238,9 @@ class WorkerRollouts:
         model: Any = self
         norm = env if isinstance(env, VecNormalize) else None
         inner: Any = norm.venv if norm is not None else env
+        selfplay = inner if isinstance(inner, SelfPlayVecEnv) else None
+        if selfplay is not None:
+            inner = selfplay.venv
         if not hasattr(inner, "play_rollouts"):
             raise ValueError(
                 "worker_rollouts plays the rollouts in the run's own environments (vec_env "
@@ -240,21 +253,32 @@ class WorkerRollouts:
         shared = None
         if norm is not None:
             shared = pickle.dumps(norm)
+        pool = [] if selfplay is None else self._playable_pool(selfplay.pool)
+
+        def seeds(share: slice, *stream: int) -> list[list[int]]:
+            run = [model.seed or 0, model.num_timesteps]
+            return [[*run, i, *stream] for i in range(share.start, share.stop)]
+
         plans = [
             RolloutPlan(
                 policy,
                 n_rollout_steps,
                 model.gamma,
                 model._last_obs[share],
-                [[model.seed or 0, model.num_timesteps, i] for i in range(share.start, share.stop)],
+                seeds(share),
                 share,
                 env.num_envs,
                 shared,
                 None if norm is None else norm.returns[share],
+                None if selfplay is None else selfplay.plan(share, pool, seeds(share, 1)),
             )
             for share in inner.shares
         ]
         parts: list[RolloutPart] = inner.play_rollouts(plans)
+        if selfplay is not None:
+            for share, part in zip(inner.shares, parts, strict=True):
+                assert part.opponents is not None  # a share given opponents returns them
+                selfplay.take(share, part.opponents)
 
         def joined(name: str, axis: int = 1) -> np.ndarray:
             return _joined(parts, name, axis)
@@ -308,6 +332,20 @@ class WorkerRollouts:
         callback.update_locals({"values": values, "dones": dones[-1]})
         callback.on_rollout_end()
         return True
+
+    def _playable_pool(self, pool: list[Any]) -> list[Any]:
+        """Self-play's pool as a worker plays it: each snapshot acting on its mean in NumPy,
+        made once a snapshot, the others (sampling snapshots, the anchors) as they are."""
+        # Imported here: numpy_snapshot builds on this module's NumpyPolicy.
+        from foosball_gym.training.sb3.numpy_snapshot import NumpySnapshot
+
+        made: dict[int, tuple[Any, Any]] = getattr(self, "_numpy_pool", {})
+        made = {id(p): made[id(p)] for p in pool if id(p) in made}
+        for player in pool:
+            if id(player) not in made:
+                made[id(player)] = (player, NumpySnapshot.of_snapshot(player))
+        self._numpy_pool = made
+        return [made[id(p)][1] for p in pool]
 
 
 def _take_statistics(norm: VecNormalize, seen: list[SeenStatistics]) -> None:

@@ -5,7 +5,9 @@ plays frozen past copies of itself, chosen outside the env.
   opponent's action. The env's action becomes ``[learner action, opponent action]`` and its
   info carries the opponent's (mirrored) observation.
 - :class:`SelfPlayVecEnv` (around the Dummy/SubprocVecEnv): before each step it evaluates the
-  opponents for all envs in one batched forward pass per opponent, then steps the envs.
+  opponents for all envs in one batched forward pass per opponent, then steps the envs. Where
+  the rollouts are played in the workers (``worker_rollouts``), each worker plays its share's
+  opponents with a copy of it made from an :class:`OpponentPlan`.
 
 Which snapshots make the pool is the choice of
 :class:`~foosball_gym.training.selfplay.callback.SelfPlayCallback`.
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
@@ -30,6 +33,42 @@ OPPONENT_OBS = "opponent_obs"
 # In the info of a game's last step: the game was against the scripted anchor, not a snapshot.
 AGAINST_ANCHOR = "against_scripted_anchor"
 # The pool indices -1, -2, ... stand for the anchors.
+
+
+@dataclass
+class OpponentPlan:
+    """What a share of the environments needs to play its opponents for a rollout: the pool
+    and the anchors (picklable players), the anchors' share, the share's rows among the run's
+    environments, and its state: each environment's next opponent observation, its assigned
+    opponent and a seed for its draws."""
+
+    pool: list[Any]
+    anchors: list[Any]
+    anchor_share: float
+    rows: slice
+    total: int
+    opp_obs: np.ndarray
+    assigned: np.ndarray
+    seeds: list[list[int]]
+
+
+@dataclass
+class OpponentState:
+    """A share's opponents as a rollout left them."""
+
+    opp_obs: np.ndarray
+    assigned: np.ndarray
+
+
+class StillOpponent:
+    """An opponent that holds its rods where they are (zeros), on a batch of observations:
+    the first opponent, until a snapshot of the learner replaces it."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return np.zeros((len(obs), self.size), np.float32)
 
 
 class _QueuedAction:
@@ -115,6 +154,11 @@ class SelfPlayVecEnv(VecEnvWrapper):
         self.whole_action = whole_action
         self.pool: list[Any] = [whole_action(opponent) if whole_action else opponent]
         self._rng = np.random.default_rng(seed)
+        # A generator for each environment where a share plays (worker_rollouts): the draws
+        # then do not depend on how the environments are split.
+        self._rngs: list[np.random.Generator] | None = None
+        # Where a share plays: its rows among the run's environments, and their number.
+        self._rows: tuple[slice, int] | None = None
         self._assigned = np.zeros(self.num_envs, dtype=int)
         self._opp_obs: np.ndarray | None = None
         self.opponent_seconds = 0.0  # time spent in opponent inference, for benchmarks
@@ -128,20 +172,59 @@ class SelfPlayVecEnv(VecEnvWrapper):
         self.pool = [self.whole_action(p) for p in pool] if self.whole_action else list(pool)
         self._assigned = np.minimum(self._assigned, len(self.pool) - 1)
 
-    def _draw(self) -> int:
-        if self.anchor_share and self._rng.random() < self.anchor_share:
+    def _draw(self, env: int) -> int:
+        rng = self._rng if self._rngs is None else self._rngs[env]
+        if self.anchor_share and rng.random() < self.anchor_share:
             # One anchor draws nothing more, as before there could be several.
             if len(self.anchors) == 1:
                 return -1
-            return -1 - int(self._rng.integers(len(self.anchors)))
-        return int(self._rng.integers(len(self.pool)))
+            return -1 - int(rng.integers(len(self.anchors)))
+        return int(rng.integers(len(self.pool)))
+
+    # -- a share played in a worker ------------------------------------------
+
+    def plan(self, rows: slice, pool: list[Any], seeds: list[list[int]]) -> OpponentPlan:
+        """The plan of the environments ``rows`` for a rollout, their opponents played by
+        ``pool`` (this env's pool as the worker can play it)."""
+        assert self._opp_obs is not None  # reset() sets it before any rollout
+        return OpponentPlan(
+            pool,
+            self.anchors,
+            self.anchor_share,
+            rows,
+            self.num_envs,
+            self._opp_obs[rows].copy(),
+            self._assigned[rows].copy(),
+            seeds,
+        )
+
+    @classmethod
+    def playing(cls, venv: VecEnv, plan: OpponentPlan) -> SelfPlayVecEnv:
+        """``venv`` (a share's environments, mid-game) with the opponents of ``plan``."""
+        env = cls(venv, plan.pool[0], anchor=plan.anchors or None, anchor_share=plan.anchor_share)
+        env.pool = list(plan.pool)
+        env._rngs = [np.random.default_rng(seed) for seed in plan.seeds]
+        env._rows = (plan.rows, plan.total)
+        env._opp_obs = plan.opp_obs.copy()
+        env._assigned = plan.assigned.copy()
+        return env
+
+    def state(self) -> OpponentState:
+        assert self._opp_obs is not None
+        return OpponentState(self._opp_obs.copy(), self._assigned.copy())
+
+    def take(self, rows: slice, state: OpponentState) -> None:
+        """The state a share's rollout left its environments ``rows`` in."""
+        assert self._opp_obs is not None
+        self._opp_obs[rows] = state.opp_obs
+        self._assigned[rows] = state.assigned
 
     # -- VecEnv -------------------------------------------------------------
 
     def reset(self) -> VecEnvObs:
         obs = self.venv.reset()
         self._opp_obs = np.stack([info[OPPONENT_OBS] for info in self.venv.reset_infos])
-        self._assigned = np.array([self._draw() for _ in range(self.num_envs)])
+        self._assigned = np.array([self._draw(i) for i in range(self.num_envs)])
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -154,9 +237,22 @@ class SelfPlayVecEnv(VecEnvWrapper):
                 anchor = self.anchors[-1 - k]
                 opp[idx] = np.stack([anchor(o) for o in self._opp_obs[idx]])
             else:
-                opp[idx] = self.pool[k](self._opp_obs[idx])
+                opp[idx] = self._batched(self.pool[k], idx)
         self.opponent_seconds += time.perf_counter() - start
         self.venv.step_async(np.concatenate([actions, opp], axis=1))
+
+    def _batched(self, player: Any, idx: np.ndarray) -> np.ndarray:
+        """``player``'s actions for the environments ``idx``. Where a share plays, they are
+        computed at the environments' rows of a batch of the run's size: BLAS rounds a row's
+        product differently in batches of other sizes, and a run should not depend on how
+        its environments are split."""
+        assert self._opp_obs is not None
+        if self._rows is None:
+            return player(self._opp_obs[idx])
+        rows, total = self._rows
+        batch = np.zeros((total, *self._opp_obs.shape[1:]), self._opp_obs.dtype)
+        batch[rows] = self._opp_obs
+        return player(batch)[rows][idx]
 
     def step_wait(self):
         obs, rewards, dones, infos = self.venv.step_wait()
@@ -166,7 +262,7 @@ class SelfPlayVecEnv(VecEnvWrapper):
                 if self._assigned[i] < 0:
                     infos[i][AGAINST_ANCHOR] = True
                 self._opp_obs[i] = self.venv.reset_infos[i][OPPONENT_OBS]
-                self._assigned[i] = self._draw()
+                self._assigned[i] = self._draw(i)
             else:
                 self._opp_obs[i] = infos[i][OPPONENT_OBS]
         return obs, rewards, dones, infos
