@@ -33,8 +33,11 @@ def run(self_play: bool, timesteps: int, n_envs: int) -> tuple[float, float]:
     model.learn(timesteps, callback=callback)
     elapsed = time.perf_counter() - start
     opponent = find_selfplay_env(venv).opponent_seconds if self_play else 0.0
+    # With worker_rollouts each process chooses its own environments' opponents, side by side.
+    processes = len(getattr(find_selfplay_env(venv).venv, "shares", [0])) if self_play else 1
+    processes = processes if config.worker_rollouts else 1
     venv.close()
-    return model.num_timesteps / elapsed, opponent / elapsed
+    return model.num_timesteps / elapsed, opponent / (elapsed * processes)
 
 
 def batched_vs_single(n_envs: int, repeats: int = 2000) -> tuple[float, float]:
@@ -65,7 +68,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory():
         for label, self_play in (("scripted opponent", False), ("self-play opponent", True)):
             rate, share = run(self_play, args.timesteps, args.n_envs)
-            extra = f", opponent inference {100 * share:.1f} % of the time" if self_play else ""
+            extra = ""
+            if self_play:
+                extra = f", opponent inference {100 * share:.1f} % of the processes' time"
             print(f"{ENV} training, {label:18s}: {rate:7,.0f} env steps/s{extra}")
     batched, single = batched_vs_single(args.n_envs)
     print(

@@ -54,10 +54,12 @@ class OpponentPlan:
 
 @dataclass
 class OpponentState:
-    """A share's opponents as a rollout left them."""
+    """A share's opponents as a rollout left them, and the seconds it spent choosing their
+    actions."""
 
     opp_obs: np.ndarray
     assigned: np.ndarray
+    seconds: float
 
 
 class StillOpponent:
@@ -161,7 +163,9 @@ class SelfPlayVecEnv(VecEnvWrapper):
         self._rows: tuple[slice, int] | None = None
         self._assigned = np.zeros(self.num_envs, dtype=int)
         self._opp_obs: np.ndarray | None = None
-        self.opponent_seconds = 0.0  # time spent in opponent inference, for benchmarks
+        # Time spent choosing the opponents' actions, for benchmarks: where the shares play,
+        # the sum of theirs, which ran side by side.
+        self.opponent_seconds = 0.0
 
     # -- pool ---------------------------------------------------------------
 
@@ -211,13 +215,14 @@ class SelfPlayVecEnv(VecEnvWrapper):
 
     def state(self) -> OpponentState:
         assert self._opp_obs is not None
-        return OpponentState(self._opp_obs.copy(), self._assigned.copy())
+        return OpponentState(self._opp_obs.copy(), self._assigned.copy(), self.opponent_seconds)
 
     def take(self, rows: slice, state: OpponentState) -> None:
         """The state a share's rollout left its environments ``rows`` in."""
         assert self._opp_obs is not None
         self._opp_obs[rows] = state.opp_obs
         self._assigned[rows] = state.assigned
+        self.opponent_seconds += state.seconds
 
     # -- VecEnv -------------------------------------------------------------
 
