@@ -209,6 +209,25 @@ def test_what_worker_rollouts_cannot_play_is_refused(bad, message):
         TrainConfig("Foosball-Block-v0", worker_rollouts=True, **bad).check()
 
 
+def test_a_self_play_run_in_the_workers_replaces_its_opponent_and_resumes(tmp_path):
+    pytest.importorskip("jax")
+    run = tmp_path / "run"
+    small = ["--n-envs", "4", "--n-steps", "64", "--batch-size", "64", "--no-progress"]
+    small += ["--eval-freq", "100000", "--eval-episodes", "1", "--checkpoint-freq", "512"]
+    # A rule that replaces the opponent after every 4 games, and games a still ball ends.
+    rule = ["--selfplay-rule", "net_score", "--selfplay-threshold", "-1", "--selfplay-window", "4"]
+    argv = ["train", "Foosball-KeeperVsKeeper-v0", "--self-play", *rule, *small, "--out", str(run)]
+    argv += ["--env-kwarg", "stagnation_steps=20", "--lr-schedule", "constant"]
+    assert main([*argv, "--timesteps", "1536"]) == 0
+    assert json.loads((run / "config.json").read_text())["worker_rollouts"] is True
+    history = json.loads((run / "selfplay" / "history.json").read_text())
+    generations = [entry["generation"] for entry in history]
+    assert max(generations) >= 1
+    assert main(["train", "--resume", str(run), "--timesteps", "2048", "--no-progress"]) == 0
+    resumed = json.loads((run / "selfplay" / "history.json").read_text())
+    assert max(entry["generation"] for entry in resumed) > max(generations)
+
+
 @pytest.mark.parametrize(
     ("bad", "message"),
     [
