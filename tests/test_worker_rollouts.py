@@ -23,9 +23,9 @@ from foosball_gym.training.config import TrainConfig  # noqa: E402
 from foosball_gym.training.loading.sb3_load import sb3_objects  # noqa: E402
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot  # noqa: E402
 from foosball_gym.training.sb3.model import RolloutPPO, build_model  # noqa: E402
+from foosball_gym.training.sb3.numpy_policy import NumpyPolicy  # noqa: E402
 from foosball_gym.training.sb3.numpy_snapshot import NumpySnapshot  # noqa: E402
 from foosball_gym.training.sb3.vec_env import make_env  # noqa: E402
-from foosball_gym.training.sb3.worker_rollouts import NumpyPolicy  # noqa: E402
 from foosball_gym.training.selfplay.opponents import (  # noqa: E402
     AGAINST_ANCHOR,
     find_selfplay_env,
@@ -231,7 +231,7 @@ def test_a_self_play_run_in_the_workers_replaces_its_opponent_and_resumes(tmp_pa
 @pytest.mark.parametrize(
     ("bad", "message"),
     [
-        ({"env_kwargs": {"residual": 0.5}}, "a residual learner's snapshots give corrections"),
+        ({"env_kwargs": {"residual": 0.5}}, "a residual learner's corrections are made whole"),
         ({"selfplay_sampled": True}, "selfplay_sampled's draws are made in the training"),
     ],
 )

@@ -113,8 +113,7 @@ class TrainConfig:
         None,
         "PPO: each process that steps environments plays its share's whole rollout with a "
         "copy of the policy, one message a rollout instead of one a step (None: on where it "
-        "can, PPO without gSDE, vec_env batched or dummy, self-play neither residual nor "
-        "sampled)",
+        "can play; asked for where it cannot, refused with the reason)",
     )
     adam_eps: float | None = _field(
         1e-8, "Adam's epsilon (None: SB3's own, 1e-5 for PPO; PyTorch's default is 1e-8)"
@@ -401,42 +400,38 @@ class TrainConfig:
 
     def _check_worker_rollouts(self) -> None:
         """Resolve worker_rollouts' default; refuse it where it was asked for and cannot play."""
-        residual = self.self_play and bool(self.env_kwargs.get("residual"))
-        if self.worker_rollouts is None:
-            self.worker_rollouts = (
-                self.algo == "ppo"
-                and not self.use_sde
-                and not (self.self_play and (residual or self.selfplay_sampled))
-                and self.vec_env != "subproc"
-            )
-        if not self.worker_rollouts:
-            return
-        if residual:
-            raise ValueError(
+        reasons = [
+            (
+                self.self_play and bool(self.env_kwargs.get("residual")),
                 "worker_rollouts plays self-play's snapshots as they are; a residual learner's "
-                "snapshots give corrections, made whole in the training process: leave "
-                "worker_rollouts off"
-            )
-        if self.self_play and self.selfplay_sampled:
-            raise ValueError(
+                "corrections are made whole in the training process: leave worker_rollouts off",
+            ),
+            (
+                self.self_play and self.selfplay_sampled,
                 "worker_rollouts plays self-play's snapshots on their mean; selfplay_sampled's "
-                "draws are made in the training process: leave one of them off"
-            )
-        if self.algo != "ppo":
-            raise ValueError(
+                "draws are made in the training process: leave one of them off",
+            ),
+            (
+                self.algo != "ppo",
                 f"worker_rollouts plays PPO's rollouts; {self.algo} learns from a replay buffer "
-                "step by step: leave it off"
-            )
-        if self.use_sde:
-            raise ValueError(
+                "step by step: leave it off",
+            ),
+            (
+                self.use_sde,
                 "worker_rollouts plays a Gaussian independent of the state; use_sde's noise is "
-                "drawn in the training process: leave one of them off"
-            )
-        if self.vec_env == "subproc":
-            raise ValueError(
+                "drawn in the training process: leave one of them off",
+            ),
+            (
+                self.vec_env == "subproc",
                 "worker_rollouts needs vec_env batched or dummy, whose processes can play a "
-                "share of the environments, not subproc"
-            )
+                "share of the environments, not subproc",
+            ),
+        ]
+        if self.worker_rollouts is None:
+            self.worker_rollouts = not any(stands for stands, _ in reasons)
+        for stands, message in reasons:
+            if self.worker_rollouts and stands:
+                raise ValueError(message)
 
     def _check_levels(self, scripted_level: Callable[[int], object]) -> None:
         """Check selfplay_scripted_levels against ``scripted_level``, which makes the

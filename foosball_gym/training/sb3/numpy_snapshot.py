@@ -15,7 +15,7 @@ from gymnasium import spaces
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot, observation_normalisation
-from foosball_gym.training.sb3.worker_rollouts import NumpyPolicy
+from foosball_gym.training.sb3.numpy_policy import NumpyPolicy
 
 
 class NumpySnapshot:
