@@ -7,6 +7,7 @@ self-play the workers play the opponents too, the same whatever the split."""
 from __future__ import annotations
 
 import json
+import zipfile
 from copy import deepcopy
 
 import numpy as np
@@ -220,6 +221,8 @@ def test_a_self_play_run_in_the_workers_replaces_its_opponent_and_resumes(tmp_pa
     argv += ["--env-kwarg", "stagnation_steps=20", "--lr-schedule", "constant"]
     assert main([*argv, "--timesteps", "1536"]) == 0
     assert json.loads((run / "config.json").read_text())["worker_rollouts"] is True
+    with zipfile.ZipFile(run / "model.zip") as saved:  # the pool's copies are not saved
+        assert "_numpy_pool" not in saved.read("data").decode()
     history = json.loads((run / "selfplay" / "history.json").read_text())
     generations = [entry["generation"] for entry in history]
     assert max(generations) >= 1

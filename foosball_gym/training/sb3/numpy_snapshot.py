@@ -57,12 +57,8 @@ class NumpySnapshot:
         """Snapshot ``model``'s policy with its environment's normalisation: in NumPy where it
         is a plain Gaussian MLP actor-critic (PPO without gSDE), else as a
         :class:`PolicySnapshot` (SAC, CrossQ, gSDE)."""
-        policy = model.policy
-        if not isinstance(policy, ActorCriticPolicy):
-            return PolicySnapshot.of_model(model)
-        try:
-            net = NumpyPolicy.of(policy, model.action_space)
-        except ValueError:
+        net = _numpy_net(model.policy, model.action_space)
+        if net is None:
             return PolicySnapshot.of_model(model)
         normalisation = observation_normalisation(model)
         return cls(net) if normalisation is None else cls(net, *normalisation)
@@ -74,11 +70,8 @@ class NumpySnapshot:
         if not isinstance(snapshot, PolicySnapshot) or not snapshot.deterministic:
             return snapshot
         policy = snapshot.policy
-        if not isinstance(policy, ActorCriticPolicy):
-            return snapshot
-        try:
-            net = NumpyPolicy.of(policy, spaces.Box(-1.0, 1.0, policy.action_space.shape))
-        except ValueError:
+        net = _numpy_net(policy, spaces.Box(-1.0, 1.0, policy.action_space.shape))
+        if net is None:
             return snapshot
         if snapshot.obs_mean is None:
             return cls(net)
@@ -91,3 +84,13 @@ class NumpySnapshot:
             obs = np.clip((obs - mean) / scale, -self._clip_obs, self._clip_obs)
         mean = self.net.mean(obs.astype(np.float32))
         return np.clip(mean, self._low, self._high).astype(np.float32)
+
+
+def _numpy_net(policy: Any, action_space: spaces.Box) -> NumpyPolicy | None:
+    """``policy``'s arrays where it is a plain Gaussian MLP actor-critic, else None."""
+    if not isinstance(policy, ActorCriticPolicy):
+        return None
+    try:
+        return NumpyPolicy.of(policy, action_space)
+    except ValueError:
+        return None

@@ -251,6 +251,10 @@ class WorkerRollouts:
         callback.on_rollout_end()
         return True
 
+    def _excluded_save_params(self) -> list[str]:
+        # The pool's NumPy copies are remade from the snapshots; a saved model holds no copy.
+        return [*super()._excluded_save_params(), "_numpy_pool"]  # type: ignore[misc]
+
     def _playable_pool(self, pool: list[Any]) -> list[Any]:
         """Self-play's pool as a worker plays it: each snapshot acting on its mean in NumPy,
         made once a snapshot, the others (sampling snapshots, the anchors) as they are."""

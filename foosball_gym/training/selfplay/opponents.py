@@ -159,8 +159,9 @@ class SelfPlayVecEnv(VecEnvWrapper):
         # A generator for each environment where a share plays (worker_rollouts): the draws
         # then do not depend on how the environments are split.
         self._rngs: list[np.random.Generator] | None = None
-        # Where a share plays: its rows among the run's environments, and their number.
-        self._rows: tuple[slice, int] | None = None
+        # Where a share plays: its rows among the run's environments, and a batch of the
+        # run's size that holds them (made once, the other rows left at zero).
+        self._rows: tuple[slice, np.ndarray] | None = None
         self._assigned = np.zeros(self.num_envs, dtype=int)
         self._opp_obs: np.ndarray | None = None
         # Time spent choosing the opponents' actions, for benchmarks: where the shares play,
@@ -208,7 +209,8 @@ class SelfPlayVecEnv(VecEnvWrapper):
         env = cls(venv, plan.pool[0], anchor=plan.anchors or None, anchor_share=plan.anchor_share)
         env.pool = list(plan.pool)
         env._rngs = [np.random.default_rng(seed) for seed in plan.seeds]
-        env._rows = (plan.rows, plan.total)
+        batch = np.zeros((plan.total, *plan.opp_obs.shape[1:]), plan.opp_obs.dtype)
+        env._rows = (plan.rows, batch)
         env._opp_obs = plan.opp_obs.copy()
         env._assigned = plan.assigned.copy()
         return env
@@ -254,8 +256,7 @@ class SelfPlayVecEnv(VecEnvWrapper):
         assert self._opp_obs is not None
         if self._rows is None:
             return player(self._opp_obs[idx])
-        rows, total = self._rows
-        batch = np.zeros((total, *self._opp_obs.shape[1:]), self._opp_obs.dtype)
+        rows, batch = self._rows
         batch[rows] = self._opp_obs
         return player(batch)[rows][idx]
 
