@@ -43,6 +43,7 @@ SHAPED = {
     "figurine_to_ball_weight": 1.0,
     "ball_aim_weight": 1.0,
     "ball_lane_weight": 1.0,
+    "ball_threat_weight": 1.0,
     "action_regularisation_weight": 0.5,
 }
 
@@ -178,30 +179,33 @@ def test_each_side_gets_its_own_shaping_and_out_of_table_terms(env_id, make_game
         lane = ball_aim_potential(-x, -y, -vx, -vy, blockers)
         blocked |= lane == 0.0 and aim > 0.0
         # In the world frame: distance to the home goal, the away rods' own figurines, the
-        # aim at the home goal, the lane to it.
+        # aim at the home goal, the lane to it, the aim at the away goal negated.
         return (
             ball_to_goal_potential(-x, -y),
             figurine_to_ball_potential(y, [rod.figurine_y(s) for rod, s in zip(away_rods, slides)]),
             aim,
             lane,
+            -ball_aim_potential(x, y, vx, vy),
         )
 
     rng = np.random.default_rng(5)
     # The ball served towards the home goal, so that the away side's aim term counts, at first
     # straight at the home keeper's figurine.
     game.reset(seed=2, options={"ball_position": (0.0, 0.02), "ball_velocity": (-2.0, 0.0)})
-    phi_goal, phi_fig, phi_aim, phi_lane = away_potentials()
+    phi_goal, phi_fig, phi_aim, phi_lane, phi_threat = away_potentials()
     last = np.zeros(game.action_space("away").shape)
-    differs = aimed = False
+    differs = aimed = threatened = False
     for _ in range(60):
         actions = random_actions(game, rng)
         _, rewards, terminated, truncated, info = game.step(actions)
         away = info["away"]
-        new_goal, new_fig, new_aim, new_lane = away_potentials()
+        new_goal, new_fig, new_aim, new_lane, new_threat = away_potentials()
         assert away["reward_ball_to_goal"] == pytest.approx(new_goal - phi_goal, abs=1e-12)
         assert away["reward_figurine_to_ball"] == pytest.approx(new_fig - phi_fig, abs=1e-12)
         assert away["reward_ball_aim"] == pytest.approx(new_aim - phi_aim, abs=1e-12)
         assert away["reward_ball_lane"] == pytest.approx(new_lane - phi_lane, abs=1e-12)
+        assert away["reward_ball_threat"] == pytest.approx(new_threat - phi_threat, abs=1e-12)
+        threatened |= new_threat < 0
         a = actions["away"].astype(float)
         assert away["reward_action_regularisation"] == pytest.approx(
             -0.5 * np.mean((a - last) ** 2)
@@ -214,10 +218,12 @@ def test_each_side_gets_its_own_shaping_and_out_of_table_terms(env_id, make_game
         differs |= away["reward_figurine_to_ball"] != info["home"]["reward_figurine_to_ball"]
         aimed |= new_aim > 0
         phi_goal, phi_fig, phi_aim, phi_lane, last = new_goal, new_fig, new_aim, new_lane, a
+        phi_threat = new_threat
         if terminated["home"] or truncated["home"]:
             break
     assert differs, "the two sides' rods are apart: their figurine terms should differ"
     assert aimed, "the ball should have headed for the home goal: the away aim term untested"
+    assert threatened, "the ball should have headed for the away goal: the threat untested"
     assert blocked, "a home figurine should have stood in the ball's lane: the lane term untested"
 
 

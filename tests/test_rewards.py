@@ -117,6 +117,45 @@ def test_ball_aim_rewards_a_shot_aimed_at_the_mouth():
         env.close()
 
 
+def test_ball_threat_is_the_aim_at_the_learners_own_goal_negated():
+    from foosball_gym.envs.rewards import ball_aim_potential, ball_threat_potential
+
+    line = table.GOAL_LINE_X
+    assert ball_threat_potential(0.5, 0.0, -5.0, 0.0) == -1.0
+    # Heading for the opponent's goal, or too slow, threatens nothing.
+    assert ball_threat_potential(-0.5, 0.0, 5.0, 0.0) == 0.0
+    assert ball_threat_potential(0.0, 0.0, -0.4, 0.0) == 0.0
+    # Beside the mouth, a bounce off a side wall folded in: the aim turned about the centre.
+    args = (line - 0.8, 0.05, 4.0, 2.0)
+    mirrored = (-args[0], -args[1], -args[2], -args[3])
+    assert 0.0 < ball_aim_potential(*args) < 1.0
+    assert ball_threat_potential(*mirrored) == -ball_aim_potential(*args)
+
+
+def test_ball_threat_rewards_a_shot_turned_away_from_the_learners_goal():
+    """Keeper against keeper: a shot at the learner's mouth costs the weight, turning it away
+    gains it back."""
+    env = gym.make(
+        "Foosball-KeeperVsKeeper-v0",
+        ball_threat_weight=100.0,
+        goal_reward=0.0,
+        opponent="scripted:0",
+    )
+    try:
+        env.reset(seed=0, options={"ball_position": (0.0, 0.0), "ball_velocity": (-3.0, 0.0)})
+        _, _, _, _, info = env.step([0.0, 0.0])
+        assert info["reward_ball_threat"] == pytest.approx(0.0, abs=1e-9)  # as at reset
+        env.unwrapped.sim.place_ball((-0.1, 0.0), (3.0, 0.0, 0.0))
+        _, reward, _, _, info = env.step([0.0, 0.0])
+        assert info["reward_ball_threat"] == pytest.approx(100.0)
+        assert reward == pytest.approx(100.0)
+        env.unwrapped.sim.place_ball((0.1, 0.0), (-3.0, 0.0, 0.0))
+        _, _, _, _, info = env.step([0.0, 0.0])
+        assert info["reward_ball_threat"] == pytest.approx(-100.0)
+    finally:
+        env.close()
+
+
 def test_ball_aim_with_lanes_counts_only_paths_past_the_figurines():
     from foosball_gym.envs.rewards import LANE_BLOCK, ball_aim_potential, lane_blockers
 

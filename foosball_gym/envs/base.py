@@ -77,6 +77,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     - `ball_lane_weight`: the weight of the potential of the ball's lane (not one of the
       paper's terms): the ball's aim, but 0 while its path meets a figurine of a rod the
       learner does not drive (one spun up, soles above the ball, stands in no lane) (0: off).
+    - `ball_threat_weight`: the weight of the potential of the ball's threat (not one of the
+      paper's terms): minus the ball's aim at the learner's own goal mouth, so that a shot
+      turned away from it gains the weight and one turned towards it loses it (0: off).
     - `action_regularisation_weight`: the weight of `-mean((a_t - a_{t-1})^2)`, which
       penalises jerky actions (0: off).
     - `shaping`: how the potentials are rewarded. `"difference"` is the authors' per-step

@@ -58,6 +58,7 @@ class EnvOptions(TypedDict, total=False):
     figurine_to_ball_weight: float
     ball_aim_weight: float
     ball_lane_weight: float
+    ball_threat_weight: float
     action_regularisation_weight: float
     shaping: Literal["difference", "potential"]
     gamma: float
@@ -110,6 +111,7 @@ class SharedOptions:
     figurine_to_ball_weight: float = 0.0
     ball_aim_weight: float = 0.0
     ball_lane_weight: float = 0.0
+    ball_threat_weight: float = 0.0
     action_regularisation_weight: float = 0.0
     shaping: Literal["difference", "potential"] = "difference"
     gamma: float = 0.99
@@ -214,6 +216,7 @@ def check_shared(
         figurine_to_ball=o.figurine_to_ball_weight,
         ball_aim=o.ball_aim_weight,
         ball_lane=o.ball_lane_weight,
+        ball_threat=o.ball_threat_weight,
         action_regularisation=o.action_regularisation_weight,
         shaping=o.shaping,
         gamma=o.gamma,

@@ -2,12 +2,13 @@
 
 Base terms: ``goal`` (+weight for a goal scored, -weight for one conceded) and
 ``out_of_table`` (-weight when the ball leaves the table upwards). Shaping terms, off at weight
-0: ``ball_to_goal``, ``figurine_to_ball``, ``ball_aim`` and ``ball_lane`` (not the paper's: how
-near the goal mouth the ball's path leads, and the same for a path past the figurines in its
-way) are potentials Φ(s) rewarded either as the
-authors' per-step difference ``w·(Φ(s') - Φ(s))`` or as potential-based shaping
-``w·(γ·Φ(s') - Φ(s))`` (with Φ = 0 at the end of an episode, so the optimal policy is
-unchanged); ``action_regularisation`` is ``-w·mean((a_t - a_{t-1})²)`` every step.
+0: ``ball_to_goal``, ``figurine_to_ball``, ``ball_aim``, ``ball_lane`` and ``ball_threat``
+(not the paper's: how near the goal mouth the ball's path leads, the same for a path past the
+figurines in its way, and minus how near the learner's own goal mouth it leads) are
+potentials Φ(s) rewarded either as the authors' per-step difference ``w·(Φ(s') - Φ(s))``
+or as potential-based shaping ``w·(γ·Φ(s') - Φ(s))`` (with Φ = 0 at the end of an episode,
+so the optimal policy is unchanged); ``action_regularisation`` is
+``-w·mean((a_t - a_{t-1})²)`` every step.
 """
 
 from __future__ import annotations
@@ -26,11 +27,12 @@ TERMS = (
     "figurine_to_ball",
     "ball_aim",
     "ball_lane",
+    "ball_threat",
     "action_regularisation",
 )
 # The terms that reward a change of potential.
-POTENTIALS = ("ball_to_goal", "figurine_to_ball", "ball_aim", "ball_lane")
-_NO_POTENTIALS = (0.0, 0.0, 0.0, 0.0)
+POTENTIALS = ("ball_to_goal", "figurine_to_ball", "ball_aim", "ball_lane", "ball_threat")
+_NO_POTENTIALS = (0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -41,6 +43,7 @@ class RewardWeights:
     figurine_to_ball: float = 0.0
     ball_aim: float = 0.0
     ball_lane: float = 0.0
+    ball_threat: float = 0.0
     action_regularisation: float = 0.0
     shaping: str = "difference"
     gamma: float = 0.99
@@ -133,6 +136,14 @@ def ball_aim_potential(
     return math.exp(-AIM_FALL * beside) if beside > 0 else 1.0
 
 
+def ball_threat_potential(x: float, y: float, vx: float, vy: float) -> float:
+    """Minus the ball's aim at the home goal: -1 while its straight path leads into the mouth
+    the learner defends, nearer 0 the further beside it, 0 while the ball does not move
+    towards it at AIM_MIN_SPEED or more (the aim of the ball turned about the table's
+    centre)."""
+    return -ball_aim_potential(-x, -y, -vx, -vy)
+
+
 class RewardComputer:
     """Keeps the previous potentials and action; returns the terms of each step.
 
@@ -159,7 +170,7 @@ class RewardComputer:
 
     def _potentials(
         self, slide: Sequence[float], ball: Sequence[float], blocking: Sequence[float]
-    ) -> tuple[float, float, float, float]:
+    ) -> tuple[float, float, float, float, float]:
         """The potentials in POTENTIALS' order (0 where a term is off)."""
         w = self.w
         x, y, vx, vy = ball[:4]
@@ -173,7 +184,8 @@ class RewardComputer:
         lane = 0.0
         if w.ball_lane:
             lane = ball_aim_potential(x, y, vx, vy, lane_blockers(self.blockers, blocking))
-        return goal, figurine, aim, lane
+        threat = ball_threat_potential(x, y, vx, vy) if w.ball_threat else 0.0
+        return goal, figurine, aim, lane, threat
 
     def reset(
         self,
@@ -205,7 +217,7 @@ class RewardComputer:
         else:
             phi = self._potentials(slide, ball, blocking)
         g = w.gamma if self._potential else 1.0
-        (w_goal, w_fig, w_aim, w_lane), old = self._weights, self._phi
+        (w_goal, w_fig, w_aim, w_lane, w_threat), old = self._weights, self._phi
         terms = {
             "goal": w.goal * goal,
             "out_of_table": -w.out_of_table if out_of_table else 0.0,
@@ -213,6 +225,7 @@ class RewardComputer:
             "figurine_to_ball": w_fig * (g * phi[1] - old[1]),
             "ball_aim": w_aim * (g * phi[2] - old[2]),
             "ball_lane": w_lane * (g * phi[3] - old[3]),
+            "ball_threat": w_threat * (g * phi[4] - old[4]),
             "action_regularisation": 0.0,
         }
         if w.action_regularisation:

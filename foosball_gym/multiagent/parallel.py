@@ -68,7 +68,7 @@ class FoosballParallelEnv(ParallelEnv):
 
     ## Rewards
     Each agent gets the single-agent terms of its own side: ``out_of_table``,
-    ``ball_to_goal``, ``figurine_to_ball``, ``ball_aim``, ``ball_lane`` and
+    ``ball_to_goal``, ``figurine_to_ball``, ``ball_aim``, ``ball_lane``, ``ball_threat`` and
     ``action_regularisation`` are computed for the away agent on the mirrored state, as the
     single-agent env computes them for its learner.
     The ``goal`` term is zero-sum: ``+goal_reward`` to the scorer, ``-goal_reward`` to the
