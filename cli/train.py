@@ -69,6 +69,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "vec_env": {"choices": VEC_ENV_KINDS},
     "n_steps": {"type": positive_int},
     "batch_size": {"type": positive_int},
+    "n_epochs": {"type": positive_int},
     "learning_rate": {"type": positive_number},
     "lr_schedule": {"choices": LR_SCHEDULES},
     "learner": {"choices": LEARNERS},

@@ -73,9 +73,11 @@ def test_train_options_show_and_keep_the_defaults_of_the_training_configuration(
     assert config_of(parser, ["train", "Foosball-Block-v0"]) == TrainConfig("Foosball-Block-v0")
     chosen = config_of(
         parser,
-        ["train", "Foosball-Block-v0", "--n-steps", "64", "--no-normalize", "--no-self-play"],
+        ["train", "Foosball-Block-v0", "--n-steps", "64", "--n-epochs", "5", "--no-normalize"]
+        + ["--no-self-play"],
     )
-    assert (chosen.n_steps, chosen.normalize, chosen.self_play) == (64, False, False)
+    assert (chosen.n_steps, chosen.n_epochs) == (64, 5)
+    assert (chosen.normalize, chosen.self_play) == (False, False)
     assert chosen.batch_size == by_name["batch_size"].default
     sampled = config_of(parser, ["train", "Foosball-KeeperVsKeeper-v0", "--selfplay-sampled"])
     assert sampled.selfplay_sampled and not by_name["selfplay_sampled"].default

@@ -102,6 +102,7 @@ def test_step_counts_take_the_forms_they_are_written_in(written, steps):
         ("--timesteps", "1e5x", "argument --timesteps: expected a whole number, got '1e5x'"),
         ("--timesteps", "inf", "argument --timesteps: expected a whole number, got 'inf'"),
         ("--n-steps", "0.5", "argument --n-steps: expected a whole number, got '0.5'"),
+        ("--n-epochs", "2.5", "argument --n-epochs: expected a whole number, got '2.5'"),
         ("--pretrain-episodes", "-1", "argument --pretrain-episodes: must be 0 or more, got -1"),
     ],
 )
