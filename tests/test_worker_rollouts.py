@@ -154,7 +154,8 @@ def test_the_numpy_policy_is_the_policy():
         copy = NumpyPolicy.of(policy, model.action_space)
         obs = np.random.default_rng(0).normal(size=(5, *model.observation_space.shape))
         rngs = [np.random.default_rng([1, i]) for i in range(5)]
-        actions, values, log_probs = copy.act(obs, rngs, slice(0, 5), 5)
+        batch = np.zeros((5, obs.shape[1]), np.float32)
+        actions, values, log_probs = copy.act(obs, rngs, slice(0, 5), batch)
         with th.no_grad():
             value, log_prob, _ = policy.evaluate_actions(
                 th.as_tensor(obs, dtype=th.float32), th.as_tensor(actions)
@@ -165,7 +166,9 @@ def test_the_numpy_policy_is_the_policy():
         # The draws spread around the mean by the policy's own deviation.
         draws = np.stack(
             [
-                copy.act(obs, [np.random.default_rng([s, i]) for i in range(5)], slice(0, 5), 5)[0]
+                copy.act(
+                    obs, [np.random.default_rng([s, i]) for i in range(5)], slice(0, 5), batch
+                )[0]
                 for s in range(400)
             ]
         )

@@ -76,15 +76,15 @@ class NumpyPolicy:
         return self._forward(self.vf, np.asarray(obs, np.float32))[..., 0]
 
     def act(
-        self, obs: np.ndarray, rngs: list[np.random.Generator], rows: slice, total: int
+        self, obs: np.ndarray, rngs: list[np.random.Generator], rows: slice, batch: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Sampled actions (unclipped), the values and the actions' log-probabilities; the noise
         of each row of ``obs`` is drawn by its own generator.
 
-        ``obs`` holds the ``rows`` of a batch of ``total``: they are computed in a batch of that
-        size, at those rows, because BLAS rounds a row's product differently in batches of other
-        sizes, and a run should not depend on how its environments are split."""
-        batch = np.zeros((total, *obs.shape[1:]), np.float32)
+        ``obs`` holds the ``rows`` of ``batch``, a float32 array of the run's size that the
+        caller makes once and this fills: they are computed in a batch of that size, at those
+        rows, because BLAS rounds a row's product differently in batches of other sizes, and a
+        run should not depend on how its environments are split."""
         batch[rows] = obs
         mean = self._forward(self.pi, batch)[rows]
         values = self._forward(self.vf, batch)[rows, 0]

@@ -118,10 +118,11 @@ def play_rollout(envs: DummyVecEnv, plan: RolloutPlan) -> RolloutPart:
     dones = np.empty((n, k), bool)
     raw_obs = np.empty((n, *obs.shape), np.float64)
     raw_returns = np.empty((n, k), np.float64)
+    batch = np.zeros((plan.total, *obs.shape[1:]), np.float32)  # the policy's, made once
     infos = []
     for t in range(n):
         observations[t] = obs
-        actions[t], values[t], log_probs[t] = policy.act(obs, rngs, plan.rows, plan.total)
+        actions[t], values[t], log_probs[t] = policy.act(obs, rngs, plan.rows, batch)
         obs, reward, dones[t], info = stepped.step(np.clip(actions[t], policy.low, policy.high))
         if norm is not None:
             # VecNormalize's running returns, which it keeps only while it learns.
