@@ -176,3 +176,47 @@ def test_evaluation_counts_the_serves_of_a_match_and_the_balls_off_the_table():
     assert "serves               2" in result.table()
     assert "off the table        0 (0.0 % of serves)" in result.table()
     assert result.to_dict()["serves"] == 2
+
+
+@pytest.mark.parametrize("share, home", [(0.0, 0), (1.0, 20)])
+def test_home_serve_share_says_whose_keeper_the_ball_lies_before(share, home):
+    env = gym.make("Foosball-KeeperVsKeeper-v0", home_serve_share=share)
+    try:
+        # The ball's x is the observation's fourth entry from the end: below 0 on the home side.
+        sides = [env.reset(seed=seed)[0][-4] < 0 for seed in range(20)]
+    finally:
+        env.close()
+    assert sum(sides) == home
+
+
+def test_the_default_serve_share_serves_as_before_seed_for_seed():
+    default = gym.make("Foosball-KeeperVsKeeper-v0")
+    even = gym.make("Foosball-KeeperVsKeeper-v0", home_serve_share=0.5)
+    try:
+        starts = [(default.reset(seed=s)[0], even.reset(seed=s)[0]) for s in range(10)]
+    finally:
+        default.close()
+        even.close()
+    assert all(np.array_equal(a, b) for a, b in starts)
+    assert len({bool(a[-4] < 0) for a, _ in starts}) == 2  # both sides served
+
+
+def test_a_match_serves_again_as_the_share_says():
+    env = gym.make(
+        "Foosball-KeeperVsKeeper-v0", continuous=True, opponent="scripted:0", home_serve_share=0.0
+    )
+    try:
+        env.reset(seed=0, options={"ball_position": (0.0, 0.1), "ball_velocity": (0.0, 0.0)})
+        for _ in range(40):
+            obs, _, _, _, info = env.step(STILL_KEEPER)
+            if info["stagnated"]:
+                break
+        assert obs[-4] > 0.4  # served again in front of the opponent's keeper
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("share", [-0.1, 1.5, "half"])
+def test_a_bad_serve_share_is_refused(share):
+    with pytest.raises(ValueError, match=r"home_serve_share must be a number in \[0, 1\]"):
+        gym.make("Foosball-KeeperVsKeeper-v0", home_serve_share=share)

@@ -77,6 +77,10 @@ class KeeperVsKeeperEnv(FoosballEnv):
       reach it, whatever the rods' slides, is dead after this many steps: served again in a
       match, a draw in a single serve, as the table's rules have it
       (`foosball_gym.table.within_reach`; `info["stagnated"]` says so). 0: never.
+    - `home_serve_share`: the chance that a serve lies in front of the learner's (home)
+      keeper, the others in front of the opponent's: 0.5, either at random, by default; 0
+      serves every ball to the opponent, a task of defence alone, and 1 every ball to the
+      learner.
 
     The other arguments are those every environment takes, described under
     [FoosballEnv][foosball_gym.envs.base.FoosballEnv]; `opponent` defaults to the scripted
@@ -95,6 +99,7 @@ class KeeperVsKeeperEnv(FoosballEnv):
     - v0: what a real table varies, off by default (episodes as before, seed for seed):
       `drive_speed_range`, `drive_accel_range`, `slide_offset_range`, `angle_offset_range`,
       `rod_angle_noise`, and `camera_noise`'s `latency_jitter_s`.
+    - v0: `home_serve_share` (0.5 by default: the serves as before, seed for seed).
     - v0: `safety_layer`, on by default with `estimated_state`: an environment on estimated
       state plays like `foosball play`, its targets shaped by the real table's safety layer.
     """
@@ -113,6 +118,7 @@ class KeeperVsKeeperEnv(FoosballEnv):
         first_to: int = 0,
         match_seconds: float | None = None,
         dead_ball_steps: int = DEAD_BALL_STEPS,
+        home_serve_share: float = 0.5,
         **shared: Unpack[GameOptions],
     ) -> None:
         super().__init__(
@@ -121,6 +127,7 @@ class KeeperVsKeeperEnv(FoosballEnv):
                 first_to=first_to,
                 match_seconds=match_seconds,
                 dead_ball_steps=dead_ball_steps,
+                home_serve_share=home_serve_share,
             ),
             **shared,
         )

@@ -11,7 +11,7 @@ from foosball_gym.policies.ladder import KEEPER_LADDER
 from foosball_gym.policy_io.task import Layout
 from foosball_gym.tasks.base import Start
 from foosball_gym.tasks.match import DEAD_BALL_STEPS, GameTask
-from foosball_gym.tasks.serves import resting_in_front_of
+from foosball_gym.tasks.serves import check_share, resting_in_front_of
 
 
 class KeeperVsKeeperTask(GameTask):
@@ -27,6 +27,7 @@ class KeeperVsKeeperTask(GameTask):
         first_to: int = 0,
         match_seconds: float | None = None,
         dead_ball_steps: int = DEAD_BALL_STEPS,
+        home_serve_share: float = 0.5,
     ) -> None:
         # A match of many serves: two sound keepers rarely score, so one serve a game leaves
         # most games drawn and tells little about which keeper is better.
@@ -36,6 +37,7 @@ class KeeperVsKeeperTask(GameTask):
             match_seconds=match_seconds,
             dead_ball_steps=dead_ball_steps,
         )
+        self.home_serve_share = check_share("home_serve_share", home_serve_share)
         self.layout = Layout(controlled=("home_keeper",), joints="both", opponent=("away_keeper",))
 
     def sample_start(
@@ -45,7 +47,7 @@ class KeeperVsKeeperTask(GameTask):
         ball_velocity=None,
         options: dict[str, Any] | None = None,
     ) -> Start:
-        team = table.HOME if rng.random() < 0.5 else table.AWAY
+        team = table.HOME if rng.random() < self.home_serve_share else table.AWAY
         position = resting_in_front_of(rng, team)
         if ball_position is not None:
             position = ball_position
