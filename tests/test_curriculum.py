@@ -40,7 +40,19 @@ def test_set_serves_changes_the_shots_from_the_next_reset_on():
     "env_id, kwargs, options, message",
     [
         ("Foosball-Score-v0", {}, {"speed_range": (1, 2)}, "serves no shots"),
-        ("Foosball-KeeperVsKeeper-v0", {}, {"speed_range": (1, 2)}, "serves no shots"),
+        ("Foosball-FullGame-v0", {}, {"speed_range": (1, 2)}, "serves no shots"),
+        (
+            "Foosball-KeeperVsKeeper-v0",
+            {},
+            {"speed_range": (1, 2)},
+            "unknown serve option 'speed_range'; keeper against keeper changes only home_serve",
+        ),
+        (
+            "Foosball-KeeperVsKeeper-v0",
+            {},
+            {"home_serve_share": 1.5},
+            r"home_serve_share must be a number in \[0, 1\]",
+        ),
         ("Foosball-Block-v0", {}, {"speeds": (1, 2)}, "unknown serve option 'speeds'.*speed_range"),
         ("Foosball-Block-v0", {}, {"speed_range": (3, 2)}, "speed_range must satisfy"),
         ("Foosball-Block-v0", {}, {"bank_share": 2}, "bank_share must be a number in"),
@@ -84,6 +96,39 @@ def test_the_obstacle_share_changes_from_the_next_reset_on():
             plain.unwrapped.set_serves(obstacle_share=0.5)
     finally:
         plain.close()
+
+
+def home_serves(env: gym.Env, episodes: int) -> int:
+    """How many of ``episodes`` serves lay before the learner's keeper (x < 0)."""
+    return sum(env.reset(seed=seed)[0][-4] < 0 for seed in range(episodes))
+
+
+def test_the_keepers_serve_share_changes_from_the_next_reset_on():
+    env = gym.make("Foosball-KeeperVsKeeper-v0")
+    try:
+        assert env.unwrapped.task.serve_options() == {"home_serve_share": 0.5}
+        env.unwrapped.set_serves(home_serve_share=0.0)
+        assert home_serves(env, 10) == 0
+        env.unwrapped.set_serves(home_serve_share=1.0)
+        assert home_serves(env, 10) == 10
+    finally:
+        env.close()
+
+
+def test_a_curriculum_from_defence_alone_ends_at_the_runs_own_share():
+    from foosball_gym.training.curriculum import run_serves
+
+    config = TrainConfig(
+        "Foosball-KeeperVsKeeper-v0",
+        {"opponent": "scripted:1"},
+        self_play=False,
+        curriculum={"home_serve_share": 0.0},
+        curriculum_steps=10,
+    )
+    config.check()
+    assert run_serves("Foosball-KeeperVsKeeper-v0", {}, ["home_serve_share"]) == {
+        "home_serve_share": 0.5
+    }
 
 
 def test_a_curriculum_over_the_obstacles_ends_at_the_runs_own_share():

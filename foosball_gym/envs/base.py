@@ -319,13 +319,13 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     def set_serves(self, **options: Any) -> None:
         """Change the incoming shots' options (``speed_range``, ``serve_x_range``,
         ``serve_y_range``, ``bank_share``, ``double_bank_share``, ``beside_mouth``,
-        ``rebound_share``; Score with obstacles its ``obstacle_share``) from the next reset
-        on, checked as the constructor checks them: a curriculum over serves
-        (``TrainConfig.curriculum``).
+        ``rebound_share``; Score with obstacles its ``obstacle_share``, keeper against keeper
+        its ``home_serve_share``) from the next reset on, checked as the constructor checks
+        them: a curriculum over serves (``TrainConfig.curriculum``).
 
         Raises:
             ValueError: the task has no such options (Score with the ball at rest and no
-                obstacles, the games), or an option is unknown or out of range.
+                obstacles, the full game), or an option is unknown or out of range.
         """
         self.task.set_serves(**options)
 

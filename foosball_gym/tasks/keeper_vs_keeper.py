@@ -40,6 +40,20 @@ class KeeperVsKeeperTask(GameTask):
         self.home_serve_share = check_share("home_serve_share", home_serve_share)
         self.layout = Layout(controlled=("home_keeper",), joints="both", opponent=("away_keeper",))
 
+    def serve_options(self) -> dict[str, Any]:
+        return {"home_serve_share": self.home_serve_share}
+
+    def set_serves(self, **options: Any) -> None:
+        """Change ``home_serve_share`` from the next serve on (a curriculum: defence first)."""
+        unknown = sorted(set(options) - {"home_serve_share"})
+        if unknown:
+            raise ValueError(
+                f"unknown serve option {unknown[0]!r}; keeper against keeper changes only "
+                "home_serve_share"
+            )
+        if options:
+            self.home_serve_share = check_share("home_serve_share", options["home_serve_share"])
+
     def sample_start(
         self,
         rng: np.random.Generator,
