@@ -99,9 +99,9 @@ class KeeperVsKeeperEnv(FoosballEnv):
     - v0: what a real table varies, off by default (episodes as before, seed for seed):
       `drive_speed_range`, `drive_accel_range`, `slide_offset_range`, `angle_offset_range`,
       `rod_angle_noise`, and `camera_noise`'s `latency_jitter_s`.
-    - v0: `home_serve_share` (0.5 by default: the serves as before, seed for seed).
     - v0: `safety_layer`, on by default with `estimated_state`: an environment on estimated
       state plays like `foosball play`, its targets shaped by the real table's safety layer.
+    - v0: `home_serve_share` (0.5 by default: the serves as before, seed for seed).
     """
 
     defaults: ClassVar[SharedOptions] = SharedOptions(
