@@ -126,6 +126,12 @@ TASKS = {
         "builtin:score-obstacles-scratch",
         (500_000, 1_000_000, 2_000_000, 4_000_000),
     ),
+    # The obstacles recipe with the paper's batch, 131,072 samples an update (development run 15).
+    "score-obstacles-paper-batch": Task(
+        "Foosball-Score-v0",
+        "builtin:score-obstacles-paper-batch-scratch",
+        (2_000_000, 5_000_000, 10_000_000, 20_000_000, 30_000_000),
+    ),
 }
 
 

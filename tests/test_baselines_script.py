@@ -95,6 +95,22 @@ def test_every_task_names_a_recipe_that_loads_for_its_environment(baselines):
         assert load_train_config(task.recipe).env_id == task.env_id, name
 
 
+def test_every_budget_is_a_step_its_run_writes_a_model_at(baselines):
+    # A budget between two checkpoints would stop the table's evaluation (budget_model).
+    pytest.importorskip("yaml")
+    from foosball_gym.training.config_file import load_train_config
+
+    for name, task in baselines.TASKS.items():
+        config = load_train_config(task.recipe)
+        options = list(task.options)
+        end = config.timesteps
+        if "--timesteps" in options:
+            end = int(options[options.index("--timesteps") + 1])
+        for steps in task.budgets:
+            on_checkpoint = steps % config.checkpoint_freq == 0 and steps % config.n_envs == 0
+            assert steps == end or on_checkpoint, (name, steps)
+
+
 def test_a_task_s_options_go_into_its_command(baselines, tmp_path: Path) -> None:
     task = baselines.TASKS["block-torch"]
     command = baselines.train_command(task, 2, tmp_path)

@@ -98,6 +98,7 @@ RECIPES = [
     "block-scratch",
     "score-incoming-aim-scratch",
     "score-incoming-scratch",
+    "score-obstacles-paper-batch-scratch",
     "score-obstacles-scratch",
     "score-resting-scratch",
 ]
