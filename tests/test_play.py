@@ -112,9 +112,16 @@ def test_the_cli_plays_the_simulated_table_in_real_time_by_default(monkeypatch, 
 
     monkeypatch.setattr(stack, "play_sim", recording_play_sim)
     argv = ["play", "scripted", "--env", "Foosball-Block-v0", "--table", "sim"]
-    assert main([*argv, "--episodes", "1", "--no-status"]) == 0
+    # On the wall clock a busy machine can stall a loop past the drives' 100 ms watchdog, and
+    # the safety layer then stops the table, as it must; a second stall in a row fails.
+    for _attempt in range(2):
+        rc = main([*argv, "--episodes", "1", "--no-status"])
+        captured = capsys.readouterr()
+        if rc == 0 or "stopped: watchdog" not in captured.err:
+            break
+    assert rc == 0, captured.err
     assert chosen["realtime"] and not chosen["pace"]
-    out = capsys.readouterr().out
+    out = captured.out
     assert "1 episodes of Foosball-Block-v0" in out
     assert re.search(r"loop period median [\d.]+ ms, p99 [\d.]+ ms; late \d+ of \d+ loops", out)
 
