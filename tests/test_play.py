@@ -112,13 +112,14 @@ def test_the_cli_plays_the_simulated_table_in_real_time_by_default(monkeypatch, 
 
     monkeypatch.setattr(stack, "play_sim", recording_play_sim)
     argv = ["play", "scripted", "--env", "Foosball-Block-v0", "--table", "sim"]
-    # On the wall clock a busy machine can stall a loop past the drives' 100 ms watchdog, and
-    # the safety layer then stops the table, as it must; a second stall in a row fails.
-    for _attempt in range(2):
+    # On the wall clock the suite's other worker can hold this process past the watchdog (it
+    # did once, 136.8 ms against 100 ms), which stops the table as it should. Once is the
+    # machine; twice in a row is the stack.
+    rc = main([*argv, "--episodes", "1", "--no-status"])
+    captured = capsys.readouterr()
+    if rc != 0 and "stopped: watchdog" in captured.err:
         rc = main([*argv, "--episodes", "1", "--no-status"])
         captured = capsys.readouterr()
-        if rc == 0 or "stopped: watchdog" not in captured.err:
-            break
     assert rc == 0, captured.err
     assert chosen["realtime"] and not chosen["pace"]
     out = captured.out
