@@ -257,6 +257,28 @@ def test_an_option_out_of_range_with_a_file_is_the_command_lines_error(score_fil
 
 
 @needs_train
+def test_two_values_that_clash_are_the_error_not_a_value_the_rest_of_the_file_answers(
+    tmp_path, capsys
+):
+    # batch_size 16384 alone is too big for the default rollout, but the file's n_steps and
+    # n_envs hold it: what is wrong is the other two settings together.
+    path = write(
+        tmp_path,
+        "env_id: Foosball-KeeperVsKeeper-v0\nn_envs: 32\nn_steps: 4096\nbatch_size: 16384\n"
+        "self_play: true\nworker_rollouts: true\nselfplay_sampled: true\n",
+    )
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", "--config", path, "--no-progress", "--out", str(tmp_path / "r")])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if ": error: " in line]
+    assert len(errors) == 1, err
+    assert "worker_rollouts" in errors[0] and "selfplay_sampled" in errors[0], err
+    assert "batch_size" not in errors[0], err
+    assert not (tmp_path / "r").exists()
+
+
+@needs_train
 def test_a_run_from_a_file_records_the_files_values_in_its_config_json(tmp_path, capsys):
     path = tmp_path / "small.yaml"
     path.write_text(

@@ -183,8 +183,13 @@ def _blame(
     err: Exception,
 ) -> Exception:
     """``err`` naming the file and the key where one value the file holds (and the command
-    line leaves) fails the check on its own; ``err`` itself where none does (a value of the
-    command line, or two values together, whose message names both)."""
+    line leaves) fails the check on its own, as it failed with the rest; ``err`` itself where
+    none does (a value of the command line, or two values together, whose message names both).
+
+    A value can fail on its own for a reason the rest of the file answers (a ``batch_size``
+    that the file's ``n_steps`` and ``n_envs`` hold): such a failure is not the file's error
+    and must not hide it.
+    """
     try:
         check_env_id(env_id)
     except ValueError as bad_id:
@@ -196,7 +201,8 @@ def _blame(
         try:
             TrainConfig(env_id=env_id, **value).check()
         except (ValueError, TypeError) as own:
-            return ConfigFileError(spec, key, str(own))
+            if str(own) == str(err):
+                return ConfigFileError(spec, key, str(own))
     return err
 
 
