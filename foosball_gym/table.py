@@ -294,6 +294,18 @@ def rod(name: str) -> Rod:
         raise ValueError(f"unknown rod {name!r}; allowed: {', '.join(ROD_BY_NAME)}") from None
 
 
+def slide_for(rod: Rod, y: float) -> float:
+    """The prismatic value that brings the figurine of ``rod`` nearest to ``y`` onto it, as far
+    as the rod slides: a rod of the side that plays it, in that side's own frame."""
+    best_miss, best = math.inf, 0.0
+    for off in rod.figurine_offsets:
+        s = min(max(y - off, -rod.slide_limit), rod.slide_limit)
+        miss = abs(s + off - y)
+        if miss < best_miss:
+            best_miss, best = miss, s
+    return best
+
+
 def rod_spin_inertia(rod: Rod) -> float:
     """The rod's moment of inertia about its axis, figurines included (kg m^2), as the URDF
     gives it."""

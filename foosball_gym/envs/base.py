@@ -155,6 +155,12 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
       baseline, and learning improves on it instead of learning it afresh. A list gives each
       entry of the action a scale of its own; 0 leaves that joint to the baseline, so that
       neither the policy's corrections nor its exploration reach it.
+    - `slide_around_ball`: above 0, a slide action spans this many metres either side of the
+      ball the policy observed, not the rod's travel: an action `a` brings the rod's figurine
+      nearest `ball_y + a * slide_around_ball` onto it, as far as the rod slides, so that the
+      figurine's place under the ball (which turns a kick by about 10 degrees a millimetre)
+      is one value of the action wherever the ball lies. Rewards see the policy's own
+      action. Tasks without an opponent only; not with `residual`; at most the table's width.
 
     Rendering:
 
@@ -241,6 +247,8 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         # Residual RL: the action corrects the scripted baseline, which sees what the agent saw.
         self._baseline = self.scripted_policy() if self.residual else None
         self._last_obs: np.ndarray | None = None
+        self._slide_band = checked.slide_around_ball
+        self._ball_y = self.obs_builder.names.index("ball_y") if self._slide_band else -1
         # This episode's drawn physical parameters (domain randomisation), for every info.
         self._dynamics: dict[str, float] = {}
         # The rods in play that the learner does not drive: they stand in the ball's lanes.
@@ -424,8 +432,13 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             assert self._last_obs is not None  # reset() sets it before any step
             base = self._baseline(self._last_obs)
             act = [float(a) for a in residual_action(base, self.residual, act)]
+        sent = act
+        if self._slide_band:
+            assert self._last_obs is not None  # reset() sets it before any step
+            ball_y = float(self._last_obs[self._ball_y])
+            sent = self.interface.slides_around_ball(act, ball_y, self._slide_band)
         game = self.game
-        game.command(act if self._safety is None else self._safety.shape(act))
+        game.command(sent if self._safety is None else self._safety.shape(sent))
         outcome = game.advance()
         if self._estimated is not None:
             self._estimated.advance(

@@ -45,6 +45,8 @@ from foosball_gym.tasks.base import Task
 
 RENDER_MODES = ("human", "rgb_array")
 RESIDUAL_LIMIT = 2.0
+# A band as wide as the table: a wider one reaches no further.
+SLIDE_AROUND_BALL_LIMIT = 2 * table.BALL_LIMIT_Y
 
 
 class EnvOptions(TypedDict, total=False):
@@ -80,6 +82,7 @@ class EnvOptions(TypedDict, total=False):
     camera_noise: dict[str, Any] | None
     safety_layer: bool | None
     residual: float | tuple[float, ...]
+    slide_around_ball: float
     render_mode: str | None
     render_width: int
     render_height: int
@@ -133,6 +136,7 @@ class SharedOptions:
     camera_noise: dict[str, Any] | None = None
     safety_layer: bool | None = None
     residual: float | tuple[float, ...] = 0.0
+    slide_around_ball: float = 0.0
     render_mode: str | None = None
     render_width: int = 320
     render_height: int = 180
@@ -156,6 +160,8 @@ class CheckedOptions:
         rod_errors: the calibration offsets' and angle noise's ranges.
         camera_noise: the simulated camera's errors; None without ``estimated_state``.
         residual: the residual scale (0.0: off), or one for each entry of the action.
+        slide_around_ball: the half width (m) of the band around the observed ball that a
+            slide action spans (0.0: off, a slide action spans the rod's travel).
         safety_layer: whether the action's targets go through the safety layer.
         physics: ``(physics_hz, control_hz, contact_travel, rolling_resistance)``.
         render: ``(render_mode, render_width, render_height)``.
@@ -170,6 +176,7 @@ class CheckedOptions:
     rod_errors: RodErrors
     camera_noise: CameraNoise | None
     residual: float | tuple[float, ...]
+    slide_around_ball: float
     safety_layer: bool
     physics: tuple[int, int, float, float]
     render: tuple[str | None, int, int]
@@ -255,6 +262,9 @@ def check_shared(
     elif o.camera_noise is not None:
         raise ValueError("camera_noise needs estimated_state=True")
     residual = check_residual(o.residual, interface.n_actions)
+    slide_around_ball = check_slide_around_ball(
+        o.slide_around_ball, bool(layout.opponent), residual
+    )
     physics = check_physics(o.physics_hz, o.control_hz, o.contact_travel, o.rolling_resistance)
     safety_layer = check_safety_layer(o.safety_layer, camera_noise is not None)
     if o.opponent is not None:
@@ -268,6 +278,7 @@ def check_shared(
         rod_errors=rod_errors,
         camera_noise=camera_noise,
         residual=residual,
+        slide_around_ball=slide_around_ball,
         safety_layer=safety_layer,
         physics=physics,
         render=render,
@@ -305,6 +316,33 @@ def _scale(value: Any) -> float:
     if isinstance(value, bool) or not 0.0 <= scale <= RESIDUAL_LIMIT:
         return math.nan
     return scale
+
+
+def check_slide_around_ball(
+    value: Any, two_player: bool, residual: float | tuple[float, ...]
+) -> float:
+    """The band (m) around the ball that a slide action spans: 0 (off) up to
+    SLIDE_AROUND_BALL_LIMIT, or a ValueError saying what is allowed."""
+    try:
+        band = float(value)
+    except (TypeError, ValueError):
+        band = math.nan
+    if isinstance(value, bool) or not 0.0 <= band <= SLIDE_AROUND_BALL_LIMIT:
+        raise ValueError(
+            f"slide_around_ball must be a number of metres in [0, {SLIDE_AROUND_BALL_LIMIT:g}] "
+            f"(0: off), got {value!r}"
+        )
+    if band and two_player:
+        # A copy of the learner playing the other side would slide in the table's frame.
+        raise ValueError(
+            f"slide_around_ball is for the tasks without an opponent (Block, Score); got {value!r}"
+        )
+    if band and residual:
+        raise ValueError(
+            "slide_around_ball cannot go with residual: the residual corrects the scripted "
+            "baseline's slides, which span the rod's travel"
+        )
+    return band
 
 
 def check_render(mode: Any, width: Any, height: Any) -> tuple[str | None, int, int]:

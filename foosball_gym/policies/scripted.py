@@ -17,6 +17,7 @@ from foosball_gym import table
 from foosball_gym.policies.aiming import clearance, offset_for_angle, plan_shot
 from foosball_gym.policies.deflection import deflection_offset
 from foosball_gym.policies.volley import volley_offset
+from foosball_gym.table import slide_for
 
 _WALL = table.BALL_LIMIT_Y
 # How far in front of a rod (ball centre minus rod x) a swing of the foot reaches the ball.
@@ -328,17 +329,6 @@ def guarded_target(rod: table.Rod, x: float, y: float, vx: float, vy: float) -> 
     # either post is nearest. A camera gives a new shot's speed only some frames late, and
     # from there no post is far.
     return y * (rod.x + table.GOAL_LINE_X) / (x + table.GOAL_LINE_X)
-
-
-def slide_for(rod: table.Rod, y: float) -> float:
-    """The prismatic value that brings the figurine of ``rod`` nearest to ``y`` onto it."""
-    best_miss, best = math.inf, 0.0
-    for off in rod.figurine_offsets:
-        s = min(max(y - off, -rod.slide_limit), rod.slide_limit)
-        miss = abs(s + off - y)
-        if miss < best_miss:
-            best_miss, best = miss, s
-    return best
 
 
 class ScriptedKeeper(ScriptedTeam):

@@ -135,6 +135,19 @@ class TaskInterface:
     def n_actions(self) -> int:
         return len(self.action_joints)
 
+    def slides_around_ball(
+        self, action: Sequence[float], ball_y: float, band: float
+    ) -> list[float]:
+        """``action`` with each slide entry moved from the band around the ball to the rod's
+        travel: an entry ``a`` brings the rod's figurine nearest ``ball_y + a * band`` onto it,
+        as far as the rod slides (the environment's ``slide_around_ball``)."""
+        out = list(action)
+        for i, (name, kind) in enumerate(self.action_joints):
+            if kind == "slide":
+                rod = table.rod(name)
+                out[i] = table.slide_for(rod, ball_y + out[i] * band) / rod.slide_limit
+        return out
+
     def action_to_targets(self, action: Sequence[float]) -> dict[Joint, float]:
         """Joint targets (m, rad) for an action, clipped to [-1, 1] as the env does."""
         targets = {joint: 0.0 for joint in self.held_joints}
