@@ -211,12 +211,6 @@ def _policy(args: argparse.Namespace) -> tuple[Any, str, dict[str, Any], Checked
         env_kwargs = {**loaded.env_kwargs, **env_kwargs}
     try:
         checked = check_env_options(env_id, env_kwargs)
-        if checked.slide_around_ball:
-            raise CliError(
-                f"slide_around_ball={checked.slide_around_ball:g}: foosball play sends a slide "
-                "action over the rod's travel, not around the ball; rate this policy with "
-                "foosball eval"
-            )
         if loaded is None:
             # A table, simulated or real, is seen through a camera and a filter.
             policy = scripted_for(checked, on_table=True, level=parse_scripted(args.model))

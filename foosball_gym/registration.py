@@ -204,6 +204,9 @@ def scripted_for(checked: CheckedOptions, on_table: bool = False, level: int | N
     Raises:
         ValueError: the environment has no such level.
     """
+    from foosball_gym.envs.options import check_scripted_slides
+
+    check_scripted_slides(checked.interface.slide_around_ball)
     precise = not (on_table or checked.values.estimated_state)
     names = list(checked.interface.builder.names)
     return checked.task.scripted_level(level, names, precise)

@@ -247,8 +247,6 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
         # Residual RL: the action corrects the scripted baseline, which sees what the agent saw.
         self._baseline = self.scripted_policy() if self.residual else None
         self._last_obs: np.ndarray | None = None
-        self._slide_band = checked.slide_around_ball
-        self._ball_y = self.obs_builder.names.index("ball_y") if self._slide_band else -1
         # This episode's drawn physical parameters (domain randomisation), for every info.
         self._dynamics: dict[str, float] = {}
         # The rods in play that the learner does not drive: they stand in the ball's lanes.
@@ -305,6 +303,7 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def scripted_policy(self) -> Policy:
         """The scripted baseline for the learner's side of this task."""
+        env_options.check_scripted_slides(self.interface.slide_around_ball)
         return self.task.scripted_policy(list(self.obs_builder.names), self._estimated is None)
 
     def success(self, goals_for: int, goals_against: int) -> bool:
@@ -433,10 +432,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
             base = self._baseline(self._last_obs)
             act = [float(a) for a in residual_action(base, self.residual, act)]
         sent = act
-        if self._slide_band:
+        if self.interface.slide_around_ball:
             assert self._last_obs is not None  # reset() sets it before any step
-            ball_y = float(self._last_obs[self._ball_y])
-            sent = self.interface.slides_around_ball(act, ball_y, self._slide_band)
+            sent = self.interface.table_action(act, self._last_obs)
         game = self.game
         game.command(sent if self._safety is None else self._safety.shape(sent))
         outcome = game.advance()

@@ -160,8 +160,6 @@ class CheckedOptions:
         rod_errors: the calibration offsets' and angle noise's ranges.
         camera_noise: the simulated camera's errors; None without ``estimated_state``.
         residual: the residual scale (0.0: off), or one for each entry of the action.
-        slide_around_ball: the half width (m) of the band around the observed ball that a
-            slide action spans (0.0: off, a slide action spans the rod's travel).
         safety_layer: whether the action's targets go through the safety layer.
         physics: ``(physics_hz, control_hz, contact_travel, rolling_resistance)``.
         render: ``(render_mode, render_width, render_height)``.
@@ -176,7 +174,6 @@ class CheckedOptions:
     rod_errors: RodErrors
     camera_noise: CameraNoise | None
     residual: float | tuple[float, ...]
-    slide_around_ball: float
     safety_layer: bool
     physics: tuple[int, int, float, float]
     render: tuple[str | None, int, int]
@@ -265,6 +262,7 @@ def check_shared(
     slide_around_ball = check_slide_around_ball(
         o.slide_around_ball, bool(layout.opponent), residual
     )
+    interface = dataclasses.replace(interface, slide_around_ball=slide_around_ball)
     physics = check_physics(o.physics_hz, o.control_hz, o.contact_travel, o.rolling_resistance)
     safety_layer = check_safety_layer(o.safety_layer, camera_noise is not None)
     if o.opponent is not None:
@@ -278,7 +276,6 @@ def check_shared(
         rod_errors=rod_errors,
         camera_noise=camera_noise,
         residual=residual,
-        slide_around_ball=slide_around_ball,
         safety_layer=safety_layer,
         physics=physics,
         render=render,
@@ -343,6 +340,16 @@ def check_slide_around_ball(
             "baseline's slides, which span the rod's travel"
         )
     return band
+
+
+def check_scripted_slides(slide_around_ball: float) -> None:
+    """A ValueError where a scripted policy would play with ``slide_around_ball``: its slide
+    actions span the rod's travel, and the band would read them around the ball."""
+    if slide_around_ball:
+        raise ValueError(
+            f"the scripted policies slide over the rod's travel, not around the ball: they do "
+            f"not play with slide_around_ball={slide_around_ball:g}"
+        )
 
 
 def check_render(mode: Any, width: Any, height: Any) -> tuple[str | None, int, int]:

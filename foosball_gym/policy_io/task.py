@@ -114,6 +114,8 @@ class TaskInterface:
         action_scales: the factor from an action in [-1, 1] to that joint's target (m or rad).
         held_joints: joints of the controlled rods that no action drives (held at 0, e.g. the
             keeper's revolute joint in Block).
+        slide_around_ball: the half width (m) of the band around the observed ball that a
+            slide action spans; 0.0: the rod's travel (the environment's option).
     """
 
     layout: Layout
@@ -121,6 +123,7 @@ class TaskInterface:
     action_joints: tuple[Joint, ...]
     action_scales: tuple[float, ...]
     held_joints: tuple[Joint, ...]
+    slide_around_ball: float = 0.0
 
     @classmethod
     def create(
@@ -135,13 +138,18 @@ class TaskInterface:
     def n_actions(self) -> int:
         return len(self.action_joints)
 
-    def slides_around_ball(
-        self, action: Sequence[float], ball_y: float, band: float
+    def table_action(
+        self, action: Sequence[float], observation: Sequence[float] | np.ndarray
     ) -> list[float]:
-        """``action`` with each slide entry moved from the band around the ball to the rod's
-        travel: an entry ``a`` brings the rod's figurine nearest ``ball_y + a * band`` onto it,
-        as far as the rod slides (the environment's ``slide_around_ball``)."""
+        """``action``, answering ``observation``, as the action over the rods' travel that
+        :meth:`action_to_targets` maps: with ``slide_around_ball``, a slide entry ``a`` brings
+        the rod's figurine nearest ``ball_y + a * slide_around_ball`` onto it, as far as the
+        rod slides; otherwise the action itself."""
         out = list(action)
+        band = self.slide_around_ball
+        if not band:
+            return out
+        ball_y = float(observation[self.builder.names.index("ball_y")])
         for i, (name, kind) in enumerate(self.action_joints):
             if kind == "slide":
                 rod = table.rod(name)

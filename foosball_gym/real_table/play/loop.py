@@ -284,7 +284,8 @@ class PlayLoop:
     def send(self, record: LoopRecord) -> None:
         """Targets through the safety layer to the drives."""
         start = time.perf_counter()
-        targets = self.interface.action_to_targets(record.action)
+        action = self.interface.table_action(record.action, record.observation)
+        targets = self.interface.action_to_targets(action)
         with self._frozen_named():
             sent = self.drives.command(targets, record.t)
         record.targets = {_key(j): float(v) for j, v in sent.items()}
