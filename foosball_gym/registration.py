@@ -202,7 +202,8 @@ def scripted_for(checked: CheckedOptions, on_table: bool = False, level: int | N
     a caller that has them resolves nothing again.
 
     Raises:
-        ValueError: the environment has no such level.
+        ValueError: the environment has no such level, or reads its slide actions around the
+            ball (``slide_around_ball``), which no scripted policy plays.
     """
     from foosball_gym.envs.options import check_scripted_slides
 

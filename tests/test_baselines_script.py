@@ -5,23 +5,16 @@ from __future__ import annotations
 
 import argparse
 import csv
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parent.parent
+from scripts_loader import load_script
 
 
 @pytest.fixture(scope="module")
 def baselines():
-    spec = importlib.util.spec_from_file_location("baselines", ROOT / "scripts" / "baselines.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["baselines"] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_script("baselines")
 
 
 RECIPE = """\

@@ -3,29 +3,21 @@ each first shot's angle, the figures the obstacles' runs are compared by in the 
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import gymnasium as gym
 import numpy as np
 import pytest
+from scripts_loader import load_script
 
 from foosball_gym import table
 from foosball_gym.policies.scripted import ScriptedTeam
 
-ROOT = Path(__file__).resolve().parent.parent
 OBSTACLES = {"ball_start": "resting", "obstacles": True}
 BALLS = 12
 
 
 @pytest.fixture(scope="module")
 def lanes():
-    spec = importlib.util.spec_from_file_location("shot_lanes", ROOT / "scripts" / "shot_lanes.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["shot_lanes"] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_script("shot_lanes")
 
 
 @pytest.fixture(scope="module")

@@ -42,6 +42,7 @@ from foosball_gym.policy_io.observations import check_flag, observation_options
 from foosball_gym.policy_io.task import TaskInterface
 from foosball_gym.sim.options import check_physics, check_randomisation
 from foosball_gym.tasks.base import Task
+from foosball_gym.tasks.serves import within
 
 RENDER_MODES = ("human", "rgb_array")
 RESIDUAL_LIMIT = 2.0
@@ -320,11 +321,8 @@ def check_slide_around_ball(
 ) -> float:
     """The band (m) around the ball that a slide action spans: 0 (off) up to
     SLIDE_AROUND_BALL_LIMIT, or a ValueError saying what is allowed."""
-    try:
-        band = float(value)
-    except (TypeError, ValueError):
-        band = math.nan
-    if isinstance(value, bool) or not 0.0 <= band <= SLIDE_AROUND_BALL_LIMIT:
+    band = within(value, SLIDE_AROUND_BALL_LIMIT)
+    if math.isnan(band):
         raise ValueError(
             f"slide_around_ball must be a number of metres in [0, {SLIDE_AROUND_BALL_LIMIT:g}] "
             f"(0: off), got {value!r}"

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from foosball_gym.policy_io.task import Joint
-from foosball_gym.tasks.serves import check_range
+from foosball_gym.tasks.serves import check_range, within
 
 #: The largest calibration offset each option allows: m for slides, rad for angles.
 OFFSET_LIMITS = {"slide_offset_range": 0.05, "angle_offset_range": 0.5}
@@ -27,11 +27,8 @@ ANGLE_NOISE_LIMIT = 0.5
 
 def check_angle_noise(value: Any) -> float:
     """``rod_angle_noise`` as a float, or a ValueError saying what it allows."""
-    try:
-        std = float(value)
-    except (TypeError, ValueError):
-        std = math.nan
-    if isinstance(value, bool) or not 0.0 <= std <= ANGLE_NOISE_LIMIT:
+    std = within(value, ANGLE_NOISE_LIMIT)
+    if math.isnan(std):
         raise ValueError(
             f"rod_angle_noise must be a standard deviation in [0, {ANGLE_NOISE_LIMIT}] rad "
             f"(0: off), got {value!r}"

@@ -7,6 +7,7 @@ into the same vector and an action into the same targets.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -149,12 +150,22 @@ class TaskInterface:
         band = self.slide_around_ball
         if not band:
             return out
-        ball_y = float(observation[self.builder.names.index("ball_y")])
-        for i, (name, kind) in enumerate(self.action_joints):
-            if kind == "slide":
-                rod = table.rod(name)
-                out[i] = table.slide_for(rod, ball_y + out[i] * band) / rod.slide_limit
+        ball_at, slides = self._slides_around_ball
+        ball_y = float(observation[ball_at])
+        for i, rod in slides:
+            out[i] = table.slide_for(rod, ball_y + out[i] * band) / rod.slide_limit
         return out
+
+    @functools.cached_property
+    def _slides_around_ball(self) -> tuple[int, tuple[tuple[int, table.Rod], ...]]:
+        """Where the observation holds the ball's y, and each slide entry's place in the action
+        with its rod: looked up once, not at every step."""
+        slides = tuple(
+            (i, table.rod(name))
+            for i, (name, kind) in enumerate(self.action_joints)
+            if kind == "slide"
+        )
+        return self.builder.names.index("ball_y"), slides
 
     def action_to_targets(self, action: Sequence[float]) -> dict[Joint, float]:
         """Joint targets (m, rad) for an action, clipped to [-1, 1] as the env does."""

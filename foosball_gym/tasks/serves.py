@@ -83,6 +83,16 @@ SERVE_FIELDS = {
 SERVE_Y_LIMITS = (-table.BALL_LIMIT_Y, table.BALL_LIMIT_Y)
 
 
+def within(value: Any, limit: float) -> float:
+    """``value`` as a float in [0, ``limit``], NaN where it is none (a bool, text, out of
+    range): what an option's check turns into its own error."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return math.nan
+    return number if not isinstance(value, bool) and 0.0 <= number <= limit else math.nan
+
+
 def check_share(name: str, value: Any) -> float:
     """A fraction in [0, 1], or a ValueError saying what is allowed."""
     try:
@@ -154,11 +164,8 @@ class Shots:
             raise ValueError(
                 f"bank_share + double_bank_share must be at most 1, got {bank} + {double}"
             )
-        try:
-            beside = float(beside_mouth)
-        except (TypeError, ValueError):
-            beside = math.nan
-        if isinstance(beside_mouth, bool) or not 0.0 <= beside <= BESIDE_MOUTH_LIMIT:
+        beside = within(beside_mouth, BESIDE_MOUTH_LIMIT)
+        if math.isnan(beside):
             raise ValueError(
                 f"beside_mouth must be a number in [0, {BESIDE_MOUTH_LIMIT}] m, "
                 f"got {beside_mouth!r}"
