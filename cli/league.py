@@ -125,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
             if not hasattr(loaded.policy, "deterministic"):
                 raise CliError(f"{spec} cannot sample its actions (an rllib policy); leave it out")
             loaded.policy.deterministic = False
-        players.append(Player(spec, loaded))
+        players.append(Player(spec, loaded.whole_action()))
     if args.sampled:
         import torch
 

@@ -198,6 +198,10 @@ def evaluate(
     with_baseline_for = getattr(policy, "with_baseline_for", None)
     if callable(with_baseline_for):
         policy = with_baseline_for(env_id, kwargs)
+    # A loaded opponent trained with slide_around_ball slides over the rods' travel here.
+    whole_action = getattr(opponent, "whole_action", None)
+    if callable(whole_action):
+        opponent = whole_action()
     if video is not None:
         kwargs["render_mode"] = "rgb_array"
         kwargs.setdefault("render_width", 640)

@@ -20,6 +20,7 @@ from stable_baselines3 import PPO  # noqa: E402
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList  # noqa: E402
 
 from foosball_gym.cli import main  # noqa: E402
+from foosball_gym.policy_io.around_ball import AroundBallPlayer  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
 from foosball_gym.training.loading.sb3_load import sb3_objects  # noqa: E402
 from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot  # noqa: E402
@@ -337,5 +338,32 @@ def test_a_snapshot_in_numpy_acts_as_the_snapshot():
         np.testing.assert_allclose(copy(obs), snapshot(obs), atol=1e-5)
         sampling = PolicySnapshot.of_model(model, deterministic=False)
         assert NumpySnapshot.of_snapshot(sampling) is sampling  # its draws are PyTorch's
+    finally:
+        venv.close()
+
+
+def test_a_snapshot_sliding_around_the_ball_keeps_its_band_in_the_workers():
+    config = TrainConfig(
+        "Foosball-KeeperVsKeeper-v0",
+        n_envs=2,
+        batch_size=128,
+        vec_env="dummy",
+        self_play=True,
+        worker_rollouts=True,
+        env_kwargs={"slide_around_ball": 0.04},
+    )
+    model, venv = _model(config)
+    try:
+        selfplay = find_selfplay_env(venv)
+        selfplay.set_pool([PolicySnapshot.of_model(model)])
+        (played,) = selfplay.pool
+        assert isinstance(played, AroundBallPlayer)
+        # The worker's copy computes the policy in NumPy, inside the same conversion.
+        (copy,) = model._playable_pool(selfplay.pool)
+        assert isinstance(copy, AroundBallPlayer) and isinstance(copy.player, NumpySnapshot)
+        obs = np.random.default_rng(0).normal(size=(6, *model.observation_space.shape)) * 0.05
+        np.testing.assert_allclose(copy(obs), played(obs), atol=1e-4)
+        # The conversion is there: the slide sent is not the policy's own.
+        assert not np.allclose(copy(obs)[:, 0], copy.player(obs)[:, 0], atol=1e-3)
     finally:
         venv.close()

@@ -160,7 +160,9 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
       nearest `ball_y + a * slide_around_ball` onto it, as far as the rod slides, so that the
       figurine's place under the ball (which turns a kick by about 10 degrees a millimetre)
       is one value of the action wherever the ball lies. Rewards see the policy's own
-      action. Tasks without an opponent only; not with `residual`; at most the table's width.
+      action. The opponent's actions span the rods' travel: a copy of such a learner there
+      plays as an `AroundBallPlayer` (`whole_action_policy`). Not with `residual`; at most
+      the table's width.
 
     Rendering:
 

@@ -260,9 +260,7 @@ def check_shared(
     elif o.camera_noise is not None:
         raise ValueError("camera_noise needs estimated_state=True")
     residual = check_residual(o.residual, interface.n_actions)
-    slide_around_ball = check_slide_around_ball(
-        o.slide_around_ball, bool(layout.opponent), residual
-    )
+    slide_around_ball = check_slide_around_ball(o.slide_around_ball, residual)
     interface = dataclasses.replace(interface, slide_around_ball=slide_around_ball)
     physics = check_physics(o.physics_hz, o.control_hz, o.contact_travel, o.rolling_resistance)
     safety_layer = check_safety_layer(o.safety_layer, camera_noise is not None)
@@ -316,9 +314,7 @@ def _scale(value: Any) -> float:
     return scale
 
 
-def check_slide_around_ball(
-    value: Any, two_player: bool, residual: float | tuple[float, ...]
-) -> float:
+def check_slide_around_ball(value: Any, residual: float | tuple[float, ...]) -> float:
     """The band (m) around the ball that a slide action spans: 0 (off) up to
     SLIDE_AROUND_BALL_LIMIT, or a ValueError saying what is allowed."""
     band = within(value, SLIDE_AROUND_BALL_LIMIT)
@@ -326,11 +322,6 @@ def check_slide_around_ball(
         raise ValueError(
             f"slide_around_ball must be a number of metres in [0, {SLIDE_AROUND_BALL_LIMIT:g}] "
             f"(0: off), got {value!r}"
-        )
-    if band and two_player:
-        # A copy of the learner playing the other side would slide in the table's frame.
-        raise ValueError(
-            f"slide_around_ball is for the tasks without an opponent (Block, Score); got {value!r}"
         )
     if band and residual:
         raise ValueError(

@@ -115,6 +115,12 @@ class FoosballParallelEnv(ParallelEnv):
                 "estimated_state=True is not supported in the two-player game: the away "
                 "agent has no simulated camera, so only the home side would see estimates"
             )
+        if env_kwargs.get("slide_around_ball"):
+            raise ValueError(
+                "slide_around_ball is not supported in the two-player game: both agents' "
+                "slides here span the rods' travel (the single-agent environment reads its "
+                "learner's around the ball)"
+            )
         spec = gym.spec(env_id)
         if max_cycles is None:
             max_cycles = spec.max_episode_steps

@@ -112,6 +112,15 @@ class LoadedPolicy:
         base = self.baseline(obs) if obs.ndim == 1 else [self.baseline(o) for o in obs]
         return residual_action(base, self.trained_residual, action)
 
+    def whole_action(self) -> Any:
+        """This policy as a player of actions over the rods' travel, for the away side of a
+        game or for games made without its options (:func:`whole_action_policy`): itself,
+        unless it was trained with ``slide_around_ball`` (a residual policy plays its baseline
+        already)."""
+        if self.env_id is None or not self.env_kwargs.get("slide_around_ball"):
+            return self
+        return whole_action_policy(self, self.env_id, self.env_kwargs)[0]
+
     def with_baseline_for(
         self, env_id: str, env_kwargs: dict[str, Any] | None = None, on_table: bool = False
     ) -> LoadedPolicy:
@@ -470,6 +479,17 @@ def _find_norm_names(zip_path: Path, run_dir: Path) -> str:
 NORM_NAMES = (NORM_FILE, LEGACY_NORM_FILE)
 
 
+# The options under which a trained policy's action is not the action over the rods' travel
+# that the opponent's side, a gate's and a league's games take (whole_action_policy).
+NOT_WHOLE_ACTION = ("residual", "slide_around_ball")
+
+
+def whole_action_options(env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``env_kwargs`` for an environment where players from :func:`whole_action_policy` play
+    both sides: without the options that make a learner's action something else."""
+    return {k: v for k, v in env_kwargs.items() if k not in NOT_WHOLE_ACTION}
+
+
 def whole_action_policy(
     policy: Any, env_id: str, env_kwargs: dict[str, Any]
 ) -> tuple[Any, dict[str, Any]]:
@@ -479,10 +499,20 @@ def whole_action_policy(
     A model trained with the option ``residual`` gives corrections to the scripted baseline:
     wherever it plays as an opponent, or in a game whose environment must take both sides'
     whole actions (self-play's opponents, a gate, a league), it plays as the baseline plus its
-    correction, and the environment is made without ``residual``. Any other policy is
-    returned as it is, with the options unchanged.
+    correction, and the environment is made without ``residual``. A model trained with
+    ``slide_around_ball`` slides around the ball it observes: there it plays as an
+    :class:`~foosball_gym.policy_io.around_ball.AroundBallPlayer`, sliding over the rods'
+    travel, and the environment is made without the band. Any other policy is returned as it
+    is, with the options unchanged.
     """
     options = dict(env_kwargs)
+    if options.get("slide_around_ball"):
+        from foosball_gym.policy_io.around_ball import AroundBallPlayer
+        from foosball_gym.registration import check_env_options
+
+        interface = check_env_options(env_id, options).interface
+        del options["slide_around_ball"]
+        return AroundBallPlayer(policy, interface), options
     residual = residual_scale(options.pop("residual", 0.0))
     if not residual:
         return policy, dict(env_kwargs)

@@ -39,6 +39,12 @@ def check_rllib_config(config: TrainConfig, num_workers: int) -> None:
             "the rllib backend's snapshots would play their bare corrections as the opponent; "
             "train a residual policy (the environment option residual) with --backend sb3"
         )
+    if config.env_kwargs.get("slide_around_ball"):
+        raise ValueError(
+            "the rllib backend's snapshots would slide around the ball as the opponent, "
+            "where its side slides over the rods' travel; train self-play with "
+            "slide_around_ball with --backend sb3"
+        )
     if config.use_sde:
         raise ValueError(
             "the rllib backend explores with a Gaussian of its own; leave use_sde off, or train "

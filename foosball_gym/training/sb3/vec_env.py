@@ -78,9 +78,12 @@ def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
             levels = config.selfplay_scripted_levels or (None,)
             anchor = [venv.env_method("scripted_opponent", n, indices=[0])[0] for n in levels]
         whole_action = None
-        if residual_scale(config.env_kwargs.get("residual")):
-            # Snapshots of a residual learner give corrections; the opponent's side of the env
-            # takes whole actions.
+        if residual_scale(config.env_kwargs.get("residual")) or config.env_kwargs.get(
+            "slide_around_ball"
+        ):
+            # Snapshots of a residual learner give corrections, and those of a learner with
+            # slide_around_ball slide around the ball; the opponent's side of the env takes
+            # whole actions over the rods' travel.
             def whole_action(snapshot: Any) -> Any:
                 return whole_action_policy(snapshot, config.env_id, config.env_kwargs)[0]
 

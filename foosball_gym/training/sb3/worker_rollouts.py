@@ -42,6 +42,7 @@ import torch as th
 from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 
+from foosball_gym.policy_io.around_ball import AroundBallPlayer
 from foosball_gym.training.sb3.numpy_policy import NumpyPolicy
 from foosball_gym.training.sb3.numpy_snapshot import NumpySnapshot
 from foosball_gym.training.selfplay.opponents import OpponentPlan, OpponentState, SelfPlayVecEnv
@@ -257,13 +258,19 @@ class WorkerRollouts:
         return [*super()._excluded_save_params(), "_numpy_pool"]  # type: ignore[misc]
 
     def _playable_pool(self, pool: list[Any]) -> list[Any]:
-        """Self-play's pool as a worker plays it: each snapshot acting on its mean in NumPy,
-        made once a snapshot, the others (sampling snapshots, the anchors) as they are."""
+        """Self-play's pool as a worker plays it: each snapshot acting on its mean in NumPy
+        (inside its conversion where it slides around the ball), made once a snapshot, the
+        others (sampling snapshots, the anchors) as they are."""
         made: dict[int, tuple[Any, Any]] = getattr(self, "_numpy_pool", {})
         made = {id(p): made[id(p)] for p in pool if id(p) in made}
         for player in pool:
-            if id(player) not in made:
-                made[id(player)] = (player, NumpySnapshot.of_snapshot(player))
+            if id(player) in made:
+                continue
+            if isinstance(player, AroundBallPlayer):
+                copy = player.around(NumpySnapshot.of_snapshot(player.player))
+            else:
+                copy = NumpySnapshot.of_snapshot(player)
+            made[id(player)] = (player, copy)
         self._numpy_pool = made
         return [made[id(p)][1] for p in pool]
 

@@ -24,7 +24,7 @@ import copy
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from foosball_gym.training.loading.loader import whole_action_policy
+from foosball_gym.training.loading.loader import whole_action_options, whole_action_policy
 from foosball_gym.training.selfplay.matches import Arena, Player, play_pair
 
 # Gate games are served with seeds from here on, offset by the learner's step count, so that
@@ -90,8 +90,9 @@ class ReplacementGate:
         self.env_id = env_id
         self.env_kwargs = dict(env_kwargs or {})
         self.games = int(games)
-        # A residual learner's snapshots play with their baseline, in games without the option.
-        self._arena_kwargs = {k: v for k, v in self.env_kwargs.items() if k != "residual"}
+        # A residual learner's snapshots play with their baseline, and a learner's with
+        # slide_around_ball convert their slides, in games without the option.
+        self._arena_kwargs = whole_action_options(self.env_kwargs)
         self._arena: Arena | None = None
 
     def judge(self, learner: Any, opponent: Any, timesteps: int) -> GateVerdict:

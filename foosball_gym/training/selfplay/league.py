@@ -237,7 +237,7 @@ def run_players(
     which never kicked a ball at each other, drew every game between them 0-0).
     """
     from foosball_gym.training.loading import load_policy
-    from foosball_gym.training.loading.loader import whole_action_policy
+    from foosball_gym.training.loading.loader import whole_action_options, whole_action_policy
     from foosball_gym.training.loading.rllib_policy import RllibPolicy, load_rllib_snapshot
     from foosball_gym.training.loading.sb3_snapshot import PolicySnapshot
 
@@ -249,10 +249,11 @@ def run_players(
             "only; rate it without sampling"
         )
     history = read_history(run_dir / SELFPLAY_DIR / HISTORY_FILE)
-    # A residual run's players give whole actions (its final policy as loaded does too), so
-    # its games are played without the option.
+    # A residual run's players give whole actions (its final policy as loaded does too), and
+    # a run's with slide_around_ball slide over the rods' travel, so its games are played
+    # without the options.
     trained_kwargs = dict(config.get("env_kwargs") or {})
-    played_kwargs = {k: v for k, v in trained_kwargs.items() if k != "residual"}
+    played_kwargs = whole_action_options(trained_kwargs)
     config = {**config, "env_kwargs": played_kwargs}
     by_generation = {h["generation"]: h for h in history}
     players = []
@@ -271,7 +272,7 @@ def run_players(
     if isinstance(final.policy, PolicySnapshot):  # an RLlib policy acts on its mean only
         final.policy.deterministic = not sampled
     timesteps = _final_timesteps(run_dir)
-    players.append(Player("final", final, None, timesteps))
+    players.append(Player("final", final.whole_action(), None, timesteps))
     return players, config
 
 
