@@ -158,11 +158,17 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
     - `slide_around_ball`: above 0, a slide action spans this many metres either side of the
       ball the policy observed, not the rod's travel: an action `a` brings the rod's figurine
       nearest `ball_y + a * slide_around_ball` onto it, as far as the rod slides, so that the
-      figurine's place under the ball (which turns a kick by about 10 degrees a millimetre)
-      is one value of the action wherever the ball lies. Rewards see the policy's own
-      action. The opponent's actions span the rods' travel: a copy of such a learner there
-      plays as an `AroundBallPlayer` (`whole_action_policy`). Not with `residual`; at most
-      the table's width.
+      figurine's place under the ball, which sets where a kick goes, is one value of the
+      action wherever the ball lies. Rewards see the policy's own action. The opponent's
+      actions span the rods' travel: a copy of such a learner there plays as an
+      `AroundBallPlayer` (`whole_action_policy`). Not with `residual`; at most the table's
+      width.
+    - `slide_past_flat`: with `slide_around_ball`, an action `a` other than 0 starts past the
+      flat of the foot (9 mm either side of its middle), the figurine brought to `ball_y + a *
+      slide_around_ball ± 9 mm`: a resting ball struck anywhere on the flat leaves straight,
+      and one struck on the foot's rounded edge turns by about 3 degrees a millimetre, so
+      that the kick's angle grows from 0 with `a` instead of staying 0 while `|a| *
+      slide_around_ball` is under 9 mm.
 
     Rendering:
 

@@ -84,6 +84,7 @@ class EnvOptions(TypedDict, total=False):
     safety_layer: bool | None
     residual: float | tuple[float, ...]
     slide_around_ball: float
+    slide_past_flat: bool
     render_mode: str | None
     render_width: int
     render_height: int
@@ -138,6 +139,7 @@ class SharedOptions:
     safety_layer: bool | None = None
     residual: float | tuple[float, ...] = 0.0
     slide_around_ball: float = 0.0
+    slide_past_flat: bool = False
     render_mode: str | None = None
     render_width: int = 320
     render_height: int = 180
@@ -261,7 +263,11 @@ def check_shared(
         raise ValueError("camera_noise needs estimated_state=True")
     residual = check_residual(o.residual, interface.n_actions)
     slide_around_ball = check_slide_around_ball(o.slide_around_ball, residual)
-    interface = dataclasses.replace(interface, slide_around_ball=slide_around_ball)
+    interface = dataclasses.replace(
+        interface,
+        slide_around_ball=slide_around_ball,
+        slide_past_flat=check_slide_past_flat(o.slide_past_flat, slide_around_ball),
+    )
     physics = check_physics(o.physics_hz, o.control_hz, o.contact_travel, o.rolling_resistance)
     safety_layer = check_safety_layer(o.safety_layer, camera_noise is not None)
     if o.opponent is not None:
@@ -329,6 +335,21 @@ def check_slide_around_ball(value: Any, residual: float | tuple[float, ...]) -> 
             "baseline's slides, which span the rod's travel"
         )
     return band
+
+
+def check_slide_past_flat(value: Any, band: float) -> float:
+    """How far (m) either side of the ball a slide action other than 0 starts, ``band`` being
+    the checked ``slide_around_ball``: the half width of the flat of a figurine's foot where
+    ``value`` is True, 0 where it is False; a ValueError for anything else, or for True
+    without a band."""
+    if not check_flag("slide_past_flat", value):
+        return 0.0
+    if not band:
+        raise ValueError(
+            "slide_past_flat needs slide_around_ball above 0: it moves the band's actions "
+            "past the flat of the foot, either side of the ball"
+        )
+    return table.FIGURINE_LEG_FLAT_HALF_WIDTH
 
 
 def check_scripted_slides(slide_around_ball: float) -> None:
