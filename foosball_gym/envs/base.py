@@ -163,12 +163,13 @@ class FoosballEnv(gym.Env[np.ndarray, np.ndarray]):
       actions span the rods' travel: a copy of such a learner there plays as an
       `AroundBallPlayer` (`whole_action_policy`). Not with `residual`; at most the table's
       width.
-    - `slide_past_flat`: with `slide_around_ball`, an action `a` other than 0 starts past the
-      flat of the foot (9 mm either side of its middle), the figurine brought to `ball_y + a *
-      slide_around_ball ± 9 mm`: a resting ball struck anywhere on the flat leaves straight,
-      and one struck on the foot's rounded edge turns by about 3 degrees a millimetre, so
-      that the kick's angle grows from 0 with `a` instead of staying 0 while `|a| *
-      slide_around_ball` is under 9 mm.
+    - `slide_skip`: with `slide_around_ball`, an action `a` other than 0 starts this many
+      metres to its side of the ball, the figurine brought to `ball_y + a * slide_around_ball
+      ± slide_skip`. A resting ball struck anywhere on the flat of the foot, 9 mm either side
+      of its middle, leaves straight, and one struck on the foot's rounded edge turns by
+      about 3 degrees a millimetre: at 0.009, the flat skipped, the kick's angle grows from 0
+      with `a` instead of staying 0 while `|a| * slide_around_ball` is under 9 mm. At most
+      the foot's half width and the ball's radius, 0.02925.
 
     Rendering:
 

@@ -48,6 +48,8 @@ RENDER_MODES = ("human", "rgb_array")
 RESIDUAL_LIMIT = 2.0
 # A band as wide as the table: a wider one reaches no further.
 SLIDE_AROUND_BALL_LIMIT = 2 * table.BALL_LIMIT_Y
+# Further beside the ball than this, the foot misses it.
+SLIDE_SKIP_LIMIT = table.FIGURINE_LEG_HALF_WIDTH + table.BALL_RADIUS
 
 
 class EnvOptions(TypedDict, total=False):
@@ -84,7 +86,7 @@ class EnvOptions(TypedDict, total=False):
     safety_layer: bool | None
     residual: float | tuple[float, ...]
     slide_around_ball: float
-    slide_past_flat: bool
+    slide_skip: float
     render_mode: str | None
     render_width: int
     render_height: int
@@ -139,7 +141,7 @@ class SharedOptions:
     safety_layer: bool | None = None
     residual: float | tuple[float, ...] = 0.0
     slide_around_ball: float = 0.0
-    slide_past_flat: bool = False
+    slide_skip: float = 0.0
     render_mode: str | None = None
     render_width: int = 320
     render_height: int = 180
@@ -266,7 +268,7 @@ def check_shared(
     interface = dataclasses.replace(
         interface,
         slide_around_ball=slide_around_ball,
-        slide_past_flat=check_slide_past_flat(o.slide_past_flat, slide_around_ball),
+        slide_skip=check_slide_skip(o.slide_skip, slide_around_ball),
     )
     physics = check_physics(o.physics_hz, o.control_hz, o.contact_travel, o.rolling_resistance)
     safety_layer = check_safety_layer(o.safety_layer, camera_noise is not None)
@@ -337,19 +339,22 @@ def check_slide_around_ball(value: Any, residual: float | tuple[float, ...]) -> 
     return band
 
 
-def check_slide_past_flat(value: Any, band: float) -> float:
-    """How far (m) either side of the ball a slide action other than 0 starts, ``band`` being
-    the checked ``slide_around_ball``: the half width of the flat of a figurine's foot where
-    ``value`` is True, 0 where it is False; a ValueError for anything else, or for True
-    without a band."""
-    if not check_flag("slide_past_flat", value):
-        return 0.0
-    if not band:
+def check_slide_skip(value: Any, band: float) -> float:
+    """How far (m) to its side of the ball a slide action other than 0 starts, ``band`` being
+    the checked ``slide_around_ball``: 0 (off) up to SLIDE_SKIP_LIMIT, or a ValueError saying
+    what is allowed, or that it needs the band."""
+    skip = within(value, SLIDE_SKIP_LIMIT)
+    if math.isnan(skip):
         raise ValueError(
-            "slide_past_flat needs slide_around_ball above 0: it moves the band's actions "
-            "past the flat of the foot, either side of the ball"
+            f"slide_skip must be a number of metres in [0, {SLIDE_SKIP_LIMIT:g}] (0: off; "
+            f"{table.FIGURINE_LEG_FLAT_HALF_WIDTH:g}, the flat of the foot), got {value!r}"
         )
-    return table.FIGURINE_LEG_FLAT_HALF_WIDTH
+    if skip and not band:
+        raise ValueError(
+            "slide_skip needs slide_around_ball above 0: it moves the band's actions to either "
+            "side of the ball"
+        )
+    return skip
 
 
 def check_scripted_slides(slide_around_ball: float) -> None:

@@ -117,9 +117,8 @@ class TaskInterface:
             keeper's revolute joint in Block).
         slide_around_ball: the half width (m) of the band around the observed ball that a
             slide action spans; 0.0: the rod's travel (the environment's option).
-        slide_past_flat: how far (m) either side of the ball a slide action other than 0
-            starts, past the flat of the foot (the option ``slide_past_flat``); 0.0: at the
-            ball.
+        slide_skip: how far (m) to its side of the ball a slide action other than 0 starts
+            (the environment's option ``slide_skip``); 0.0: at the ball.
     """
 
     layout: Layout
@@ -128,7 +127,7 @@ class TaskInterface:
     action_scales: tuple[float, ...]
     held_joints: tuple[Joint, ...]
     slide_around_ball: float = 0.0
-    slide_past_flat: float = 0.0
+    slide_skip: float = 0.0
 
     @classmethod
     def create(
@@ -149,7 +148,7 @@ class TaskInterface:
         """``action``, answering ``observation``, as the action over the rods' travel that
         :meth:`action_to_targets` maps: with ``slide_around_ball``, a slide entry ``a`` brings
         the rod's figurine nearest ``ball_y + a * slide_around_ball`` onto it (plus or minus
-        ``slide_past_flat`` as ``a`` is above or below 0), as far as the rod slides; otherwise
+        ``slide_skip`` as ``a`` is above or below 0), as far as the rod slides; otherwise
         the action itself."""
         out = list(action)
         band = self.slide_around_ball
@@ -157,10 +156,10 @@ class TaskInterface:
             return out
         ball_at, slides = self._slides_around_ball
         ball_y = float(observation[ball_at])
-        past = self.slide_past_flat
+        skip = self.slide_skip
         for i, rod in slides:
             a = out[i]
-            offset = a * band + (past if a > 0 else -past if a < 0 else 0.0)
+            offset = a * band + (skip if a > 0 else -skip if a < 0 else 0.0)
             out[i] = table.slide_for(rod, ball_y + offset) / rod.slide_limit
         return out
 

@@ -373,7 +373,7 @@ def policy_size(policy: Any) -> int:
 
 # The options under which a trained policy's action is not the action over the rods' travel
 # that the opponent's side, a gate's and a league's games take (whole_action_policy).
-NOT_WHOLE_ACTION = ("residual", "slide_around_ball", "slide_past_flat")
+NOT_WHOLE_ACTION = ("residual", "slide_around_ball", "slide_skip")
 
 
 def whole_action_options(env_kwargs: dict[str, Any]) -> dict[str, Any]:
@@ -404,7 +404,7 @@ def whole_action_policy(
 
         interface = check_env_options(env_id, options).interface
         del options["slide_around_ball"]
-        options.pop("slide_past_flat", None)
+        options.pop("slide_skip", None)
         return AroundBallPlayer(policy, interface), options
     residual = residual_scale(options.pop("residual", 0.0))
     if not residual:

@@ -1,5 +1,5 @@
-"""The option slide_past_flat: with slide_around_ball, a slide action other than 0 starts past
-the flat of the foot, where a kick starts to turn."""
+"""The option slide_skip: with slide_around_ball, a slide action other than 0 starts that far to
+its side of the ball; past the flat of the foot, where a kick starts to turn."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def test_a_kick_off_the_flat_of_the_foot_goes_straight_wherever_on_the_flat():
 
 
 def test_past_the_flat_the_kick_turns_with_the_action_from_the_first_millimetre():
-    angles = {a: _first_shot_angle(a, slide_past_flat=True) for a in (0.0, 0.1, 0.3, -0.3)}
+    angles = {a: _first_shot_angle(a, slide_skip=FLAT) for a in (0.0, 0.1, 0.3, -0.3)}
     assert abs(angles[0.0]) < 0.5
     # The ball meets the foot's rounded edge (3 mm round) 1.5 mm and 4.5 mm past the flat:
     # asin(offset / (edge radius + ball radius)) turns it about 4 and 13 degrees, away from
@@ -55,7 +55,7 @@ def test_past_the_flat_the_kick_turns_with_the_action_from_the_first_millimetre(
 
 def test_the_figurine_stands_past_the_flat_either_side_of_the_ball():
     interface = check_env_options(
-        "Foosball-Score-v0", {"slide_around_ball": BAND, "slide_past_flat": True}
+        "Foosball-Score-v0", {"slide_around_ball": BAND, "slide_skip": FLAT}
     ).interface
     names = interface.builder.names
     obs = np.zeros(len(names))
@@ -68,22 +68,24 @@ def test_the_figurine_stands_past_the_flat_either_side_of_the_ball():
     assert keeper.figurine_y(slide)[0] == pytest.approx(0.02, abs=1e-9)
 
 
-@pytest.mark.parametrize("value", [1, "yes", None])
-def test_slide_past_flat_is_a_flag(value):
-    with pytest.raises(ValueError, match="slide_past_flat must be True or False"):
-        gym.make("Foosball-Score-v0", slide_around_ball=BAND, slide_past_flat=value)
+@pytest.mark.parametrize("value", [-0.001, 0.05, True, "wide", float("nan"), None])
+def test_a_skip_that_is_not_a_place_on_the_foot_is_refused(value):
+    with pytest.raises(
+        ValueError, match=r"slide_skip must be a number of metres in \[0, 0.02925\]"
+    ):
+        gym.make("Foosball-Score-v0", slide_around_ball=BAND, slide_skip=value)
 
 
-def test_slide_past_flat_needs_the_band():
-    with pytest.raises(ValueError, match="slide_past_flat needs slide_around_ball above 0"):
-        gym.make("Foosball-Score-v0", slide_past_flat=True)
+def test_slide_skip_needs_the_band():
+    with pytest.raises(ValueError, match="slide_skip needs slide_around_ball above 0"):
+        gym.make("Foosball-Score-v0", slide_skip=FLAT)
 
 
 def test_a_copy_of_the_learner_on_the_away_side_slides_past_the_flat_as_it_learned():
     from foosball_gym.training.loading.loader import whole_action_policy
 
     env_id = "Foosball-KeeperVsKeeper-v0"
-    options = {"slide_around_ball": BAND, "slide_past_flat": True, "stagnation_steps": 60}
+    options = {"slide_around_ball": BAND, "slide_skip": FLAT, "stagnation_steps": 60}
     env = gym.make(env_id, **options)
     try:
         obs, _ = env.reset(seed=3)
