@@ -102,12 +102,14 @@ RECIPES = [
     "score-obstacles-scratch",
     "score-resting-scratch",
 ]
+# Learned from nothing by self-play, the ladder's rungs among the opponents.
+SELF_PLAY_RECIPES = ["keeper-vs-keeper-scratch"]
 
 
 def test_the_shipped_files_are_one_per_shipped_task_the_from_scratch_recipes_and_the_papers():
     # A new task needs no settings file (docs/add-a-task.md); one it ships names a registered id.
     assert set(SHIPPED_TASKS) <= set(ENV_IDS)
-    assert shipped_configs() == sorted([*SHIPPED_TASKS, *RECIPES, "paper-ppo"])
+    assert shipped_configs() == sorted([*SHIPPED_TASKS, *RECIPES, *SELF_PLAY_RECIPES, "paper-ppo"])
 
 
 def test_the_defaults_are_the_block_recipe_that_learns_from_scratch():
@@ -144,6 +146,15 @@ def test_a_from_scratch_recipe_has_no_demonstrations_teacher_or_residual(name):
     assert config.pretrain_episodes == 0 and config.teacher_steps == 0
     assert not config.env_kwargs.get("residual")
     assert not config.self_play
+
+
+@pytest.mark.parametrize("name", SELF_PLAY_RECIPES)
+def test_a_self_play_recipe_from_nothing_has_no_teacher_and_meets_the_ladder_in_training(name):
+    config = load_train_config(f"builtin:{name}")
+    assert config_path(f"builtin:{name}").read_text().startswith(f"# {config.env_id}")
+    assert config.pretrain_episodes == 0 and config.teacher_steps == 0
+    assert not config.env_kwargs.get("residual")
+    assert config.self_play and config.selfplay_scripted_share > 0
 
 
 def test_the_incoming_aim_recipe_is_the_settings_its_baselines_rows_were_trained_with():
