@@ -403,9 +403,7 @@ def whole_action_policy(
         from foosball_gym.registration import check_env_options
 
         interface = check_env_options(env_id, options).interface
-        del options["slide_around_ball"]
-        options.pop("slide_skip", None)
-        return AroundBallPlayer(policy, interface), options
+        return AroundBallPlayer(policy, interface), whole_action_options(options)
     residual = residual_scale(options.pop("residual", 0.0))
     if not residual:
         return policy, dict(env_kwargs)
