@@ -43,12 +43,16 @@ MARGINS = {"score-obstacles": 0.06}
 # safety layer (92.0 % of 500, 86 % on these 100); its true-state floors are below.
 FLOORS = {"block": 0.84, "score-resting": 0.95, "score-obstacles": 0.6, "score-incoming": 0.9}
 # The opponent a two-player policy is measured against, where it is not the kicking keeper.
-OPPONENTS = {"keeper-vs-keeper": "scripted"}
+OPPONENTS = {"keeper-vs-keeper": "scripted", "keeper-vs-keeper-scratch": "scripted"}
 
 
 def test_the_promised_policies_are_shipped():
     promised = {"block", "score-resting", "score-obstacles", "score-incoming", "keeper-vs-keeper"}
-    promised |= {"keeper-vs-keeper-selfplay", "keeper-vs-keeper-teacher"}
+    promised |= {
+        "keeper-vs-keeper-selfplay",
+        "keeper-vs-keeper-teacher",
+        "keeper-vs-keeper-scratch",
+    }
     assert promised <= set(builtin_names())
 
 
@@ -73,8 +77,9 @@ def test_a_shipped_policy_says_which_physics_it_was_trained_on(name):
 def test_a_shipped_policy_does_at_least_as_well_as_the_scripted_baseline(name):
     loaded = load_policy(f"builtin:{name}")
     env = gym.make(loaded.env_id, **loaded.env_kwargs)
-    scripted = env.unwrapped.scripted_policy()
     two_player = bool(env.unwrapped.layout.opponent)
+    # A policy whose slide is read around the ball has no scripted twin on its options.
+    scripted = None if two_player else env.unwrapped.scripted_policy()
     env.close()
     # keeper-vs-keeper learned against the attacking keeper, the top of the scripted ladder;
     # the earlier keepers against the kicking keeper, rung 1 (the env's default opponent
@@ -86,6 +91,11 @@ def test_a_shipped_policy_does_at_least_as_well_as_the_scripted_baseline(name):
         # 442 goals for, 98 against over 500 matches (its REPRODUCE.md); 10 and 2 on these
         # 100 serves. The attacking keeper in its place scored 26 and conceded 45 over 200.
         assert trained.goals_for >= 5 and trained.goals_for >= 1.5 * trained.goals_against
+    elif name == "keeper-vs-keeper-scratch":
+        # Learned from nothing: 51 goals for, 12 against over 500 serves kept apart (its
+        # REPRODUCE.md), 10 and 3 on these 100. Against the kicking keeper it scores a few in
+        # 500, too few for 100 serves to tell. A broken keeper concedes dozens.
+        assert trained.goals_for >= 5 and trained.goals_for >= trained.goals_against, trained
     elif two_player:
         # The earlier keepers play level with the kicking keeper (keeper-vs-keeper-selfplay: 28
         # goals for, 13 against over 500 games, 2 and 2 on these 100; its teacher 13 and 14, 3

@@ -157,6 +157,19 @@ def test_a_self_play_recipe_from_nothing_has_no_teacher_and_meets_the_ladder_in_
     assert config.self_play and config.selfplay_scripted_share > 0
 
 
+def test_the_shipped_keeper_from_nothing_is_its_recipe_with_seed_3():
+    # builtin:keeper-vs-keeper-scratch names this settings file in its REPRODUCE.md: a change to
+    # the file that leaves the policy behind would make that command train something else.
+    shipped = Path(foosball_gym.__file__).parent / "builtin" / "keeper-vs-keeper-scratch"
+    argv = ["Foosball-KeeperVsKeeper-v0", "--config", "builtin:keeper-vs-keeper-scratch"]
+    recipe = config_of([*argv, "--seed", "3"])
+    recipe.check()  # picks the learner the run picked: JAX's update, with the train extra
+    assert TrainConfig.load(shipped / "config.json") == recipe
+    assert "--config builtin:keeper-vs-keeper-scratch --seed 3" in " ".join(
+        (shipped / "REPRODUCE.md").read_text().split()
+    )
+
+
 def test_the_incoming_aim_recipe_is_the_settings_its_baselines_rows_were_trained_with():
     # scripts/baselines.py's task score-incoming-aim-entropy: the incoming recipe and options.
     options = ["--env-kwarg", "ball_aim_weight=300", "--worker-rollouts", "--ent-coef", "0.01"]
