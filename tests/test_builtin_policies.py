@@ -78,7 +78,8 @@ def test_a_shipped_policy_does_at_least_as_well_as_the_scripted_baseline(name):
     loaded = load_policy(f"builtin:{name}")
     env = gym.make(loaded.env_id, **loaded.env_kwargs)
     two_player = bool(env.unwrapped.layout.opponent)
-    # A policy whose slide is read around the ball has no scripted twin on its options.
+    # Only a one-player task is measured against its scripted twin; a two-player policy plays
+    # the ladder below (and one whose slide is read around the ball has no twin on its options).
     scripted = None if two_player else env.unwrapped.scripted_policy()
     env.close()
     # keeper-vs-keeper learned against the attacking keeper, the top of the scripted ladder;
