@@ -103,7 +103,7 @@ RECIPES = [
     "score-resting-scratch",
 ]
 # Learned from nothing by self-play, the ladder's rungs among the opponents.
-SELF_PLAY_RECIPES = ["keeper-vs-keeper-scratch"]
+SELF_PLAY_RECIPES = ["full-game-scratch", "keeper-vs-keeper-scratch"]
 
 
 def test_the_shipped_files_are_one_per_shipped_task_the_from_scratch_recipes_and_the_papers():
