@@ -89,6 +89,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "selfplay_pool": {"type": positive_int},
     "selfplay_scripted_share": {"type": float},
     "selfplay_scripted_levels": {"type": _levels, "metavar": "N,N,..."},
+    "selfplay_ladder_steps": {"type": whole_number, "metavar": "STEPS"},
     "selfplay_gate": {"type": whole_number, "metavar": "GAMES"},
     "selfplay_stall_games": {"type": whole_number, "metavar": "GAMES"},
     "selfplay_stall_fallback": {"choices": ("none", *SELFPLAY_RULES)},

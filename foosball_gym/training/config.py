@@ -23,6 +23,7 @@ from foosball_gym.training.config_kinds import KINDS_SPELLED, of_kind
 from foosball_gym.training.curriculum import check_curriculum
 from foosball_gym.training.run_dir.files import atomic_write_text, read_json
 from foosball_gym.training.run_dir.physics import physics_record
+from foosball_gym.training.selfplay.ladder import check_ladder_steps, check_levels
 from foosball_gym.training.selfplay.rule import SELFPLAY_RULES, check_rule, default_threshold
 
 if TYPE_CHECKING:
@@ -169,6 +170,11 @@ class TrainConfig:
         (),
         "the rungs of the game's scripted ladder that the scripted share of the games is drawn "
         "from, one at random for each game (empty: the top alone, the default opponent)",
+    )
+    selfplay_ladder_steps: int = _field(
+        0,
+        "the rungs of selfplay_scripted_levels join the scripted games one at a time, in the "
+        "order listed, one more every this many steps (0: all from the start)",
     )
     selfplay_sampled: bool = _field(
         False,
@@ -384,7 +390,8 @@ class TrainConfig:
         if self.self_play is None:
             self.self_play = two_player
         if self.selfplay_scripted_levels:
-            self._check_levels(levels)
+            check_levels(self, levels)
+        check_ladder_steps(self.selfplay_ladder_steps, self.selfplay_scripted_levels)
         if self.selfplay_gate and not self.self_play:
             raise ValueError(
                 f"selfplay_gate judges self-play's replacements; {self.env_id} trains without "
@@ -432,29 +439,6 @@ class TrainConfig:
         for stands, message in reasons:
             if self.worker_rollouts and stands:
                 raise ValueError(message)
-
-    def _check_levels(self, scripted_level: Callable[[int], object]) -> None:
-        """Check selfplay_scripted_levels against ``scripted_level``, which makes the
-        scripted team of a rung of the task's ladder or raises ValueError."""
-        levels = self.selfplay_scripted_levels
-        if isinstance(levels, str | bytes) or not all(
-            isinstance(n, int) and not isinstance(n, bool) for n in levels
-        ):
-            raise ValueError(
-                "selfplay_scripted_levels must be a list of the ladder's rung numbers, e.g. "
-                f"[1, 2, 3], got {levels!r}"
-            )
-        if not self.self_play or not self.selfplay_scripted_share:
-            raise ValueError(
-                "selfplay_scripted_levels says which scripted teams the scripted share of "
-                "self-play's games meets: it needs self-play and selfplay_scripted_share above 0"
-            )
-        for level in levels:
-            try:
-                scripted_level(level)
-            except ValueError as e:
-                raise ValueError(f"selfplay_scripted_levels: {e}") from None
-        self.selfplay_scripted_levels = tuple(levels)
 
     def save(self, path: Path) -> None:
         """Write the configuration with the record of the physics it is about to train on.

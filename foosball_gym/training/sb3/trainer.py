@@ -52,6 +52,7 @@ from foosball_gym.training.sb3.vec_env import make_env
 from foosball_gym.training.sb3.videos import VideoCallback
 from foosball_gym.training.selfplay.callback import SelfPlayCallback
 from foosball_gym.training.selfplay.gate import ReplacementGate
+from foosball_gym.training.selfplay.ladder import LadderCurriculum
 
 # As their authors write them (the model of learner: jax is a PPO of its own class).
 ALGO_NAMES = {"ppo": "PPO", "sac": "SAC", "crossq": "CrossQ"}
@@ -263,6 +264,12 @@ def _train(
                 fallback=stall_fallback(config),
             )
         )
+    if config.selfplay_ladder_steps:
+        ladder = LadderCurriculum(
+            config.selfplay_ladder_steps, len(config.selfplay_scripted_levels)
+        )
+        ladder.apply(venv, done_steps)  # before learn() resets the environments, as below
+        own.append(ladder)
     if config.teacher_steps:
         own.append(
             TeacherCallback(

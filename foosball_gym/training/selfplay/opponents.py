@@ -152,6 +152,8 @@ class SelfPlayVecEnv(VecEnvWrapper):
                 f"{anchor_share!r} with {'an' if anchor is not None else 'no'} anchor"
             )
         self.anchors = _listed(anchor)
+        # How many of the anchors, from the first, the games meet (LadderCurriculum raises it).
+        self.anchors_in_play = len(self.anchors)
         self.anchor_share = float(anchor_share)
         self.whole_action = whole_action
         self.pool: list[Any] = [whole_action(opponent) if whole_action else opponent]
@@ -181,9 +183,9 @@ class SelfPlayVecEnv(VecEnvWrapper):
         rng = self._rng if self._rngs is None else self._rngs[env]
         if self.anchor_share and rng.random() < self.anchor_share:
             # One anchor draws nothing more, as before there could be several.
-            if len(self.anchors) == 1:
+            if self.anchors_in_play == 1:
                 return -1
-            return -1 - int(rng.integers(len(self.anchors)))
+            return -1 - int(rng.integers(self.anchors_in_play))
         return int(rng.integers(len(self.pool)))
 
     # -- a share played in a worker ------------------------------------------
@@ -194,7 +196,7 @@ class SelfPlayVecEnv(VecEnvWrapper):
         assert self._opp_obs is not None  # reset() sets it before any rollout
         return OpponentPlan(
             pool,
-            self.anchors,
+            self.anchors[: self.anchors_in_play],
             self.anchor_share,
             rows,
             self.num_envs,
