@@ -13,7 +13,8 @@ from stable_baselines3.common.env_util import make_vec_env  # noqa: E402
 
 from foosball_gym.training import OpponentActionWrapper, SelfPlayVecEnv  # noqa: E402
 from foosball_gym.training.config import TrainConfig  # noqa: E402
-from foosball_gym.training.selfplay.ladder import LadderCurriculum, rungs_in_play  # noqa: E402
+from foosball_gym.training.selfplay.ladder import rungs_in_play  # noqa: E402
+from foosball_gym.training.selfplay.ladder_curriculum import LadderCurriculum  # noqa: E402
 
 ENV = "Foosball-KeeperVsKeeper-v0"
 

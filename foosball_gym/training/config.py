@@ -390,7 +390,12 @@ class TrainConfig:
         if self.self_play is None:
             self.self_play = two_player
         if self.selfplay_scripted_levels:
-            check_levels(self, levels)
+            self.selfplay_scripted_levels = check_levels(
+                self.selfplay_scripted_levels,
+                bool(self.self_play),
+                self.selfplay_scripted_share,
+                levels,
+            )
         check_ladder_steps(self.selfplay_ladder_steps, self.selfplay_scripted_levels)
         if self.selfplay_gate and not self.self_play:
             raise ValueError(

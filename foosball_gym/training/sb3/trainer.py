@@ -52,7 +52,7 @@ from foosball_gym.training.sb3.vec_env import make_env
 from foosball_gym.training.sb3.videos import VideoCallback
 from foosball_gym.training.selfplay.callback import SelfPlayCallback
 from foosball_gym.training.selfplay.gate import ReplacementGate
-from foosball_gym.training.selfplay.ladder import LadderCurriculum
+from foosball_gym.training.selfplay.ladder_curriculum import LadderCurriculum
 
 # As their authors write them (the model of learner: jax is a PPO of its own class).
 ALGO_NAMES = {"ppo": "PPO", "sac": "SAC", "crossq": "CrossQ"}
