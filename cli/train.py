@@ -93,6 +93,7 @@ OPTIONS: dict[str, dict[str, Any]] = {
     "selfplay_gate": {"type": whole_number, "metavar": "GAMES"},
     "selfplay_stall_games": {"type": whole_number, "metavar": "GAMES"},
     "selfplay_stall_fallback": {"choices": ("none", *SELFPLAY_RULES)},
+    "rods_held_share": {"type": float, "metavar": "SHARE"},
     "target_success": {"type": float},
     "video_every": {"type": positive_int, "metavar": "N"},
 }

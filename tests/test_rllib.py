@@ -161,6 +161,12 @@ def test_what_the_rllib_backend_cannot_train_is_refused(overrides, message):
         check_rllib_config(TrainConfig(ENV, **overrides), num_workers=1)
 
 
+def test_the_rllib_backend_refuses_to_hold_rods():
+    config = TrainConfig("Foosball-FullGame-v0", rods_held_share=0.5)
+    with pytest.raises(ValueError, match="drives every rod in every game"):
+        check_rllib_config(config, num_workers=1)
+
+
 def test_rllib_options_parse():
     parser = argparse.ArgumentParser()
     add_rllib_arguments(parser)

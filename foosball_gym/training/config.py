@@ -21,6 +21,7 @@ import gymnasium as gym
 from foosball_gym.registration import ENV_IDS, check_env_id, check_env_options
 from foosball_gym.training.config_kinds import KINDS_SPELLED, of_kind
 from foosball_gym.training.curriculum import check_curriculum
+from foosball_gym.training.held_rods import check_rods_held_share
 from foosball_gym.training.run_dir.files import atomic_write_text, read_json
 from foosball_gym.training.run_dir.physics import physics_record
 from foosball_gym.training.selfplay.ladder import check_ladder_steps, check_levels
@@ -206,6 +207,11 @@ class TrainConfig:
         },
     )
     curriculum_steps: int = _field(0, "steps over which the curriculum's serves become the run's")
+    rods_held_share: float = _field(
+        0.0,
+        "in each training game, each of the learner's rods is held at the action 0 with this "
+        "chance, at least one left to it (0: none held)",
+    )
     eval_freq: int = _field(25_000, "evaluate every this many steps")
     eval_episodes: int = _field(50, "seeded episodes per evaluation")
     checkpoint_freq: int = _field(50_000, "write a checkpoint every this many steps")
@@ -370,6 +376,7 @@ class TrainConfig:
             checked = check_env_options(self.env_id, self.env_kwargs)
             names = list(checked.interface.builder.names)
             two_player = checked.two_player
+            n_rods = len(checked.interface.layout.controlled)
             levels: Callable[[int], object] = partial(checked.task.scripted_level, names=names)
         else:
             # Another registered environment: only making it says what it takes.
@@ -377,6 +384,7 @@ class TrainConfig:
             try:
                 foosball = cast("FoosballEnv", env.unwrapped)
                 two_player, levels = bool(foosball.layout.opponent), foosball.scripted_opponent
+                n_rods = len(foosball.layout.controlled)
             finally:
                 env.close()
         if self.curriculum or self.curriculum_steps:
@@ -397,6 +405,7 @@ class TrainConfig:
                 levels,
             )
         check_ladder_steps(self.selfplay_ladder_steps, self.selfplay_scripted_levels)
+        check_rods_held_share(self.rods_held_share, n_rods, self.env_id)
         if self.selfplay_gate and not self.self_play:
             raise ValueError(
                 f"selfplay_gate judges self-play's replacements; {self.env_id} trains without "

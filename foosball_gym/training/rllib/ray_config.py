@@ -60,6 +60,11 @@ def check_rllib_config(config: TrainConfig, num_workers: int) -> None:
             "the rllib backend has no gate on its replacements; leave selfplay_gate at 0, or "
             "train with --backend sb3"
         )
+    if config.rods_held_share:
+        raise ValueError(
+            "the rllib backend drives every rod in every game; leave rods_held_share at 0, or "
+            "train with --backend sb3"
+        )
     if config.video_every is not None:
         raise ValueError(
             "the rllib backend writes no clips; leave video_every out, or record the run "

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import signal
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 from stable_baselines3.common.env_util import make_vec_env
@@ -13,6 +14,7 @@ from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 import foosball_gym.registration  # noqa: F401  (the package registers the ids)
 from foosball_gym.policy_io.task import residual_scale
 from foosball_gym.training.config import VEC_ENV_KINDS, TrainConfig
+from foosball_gym.training.held_rods import HeldRodsWrapper
 from foosball_gym.training.loading.loader import whole_action_policy
 from foosball_gym.training.sb3.batched_vec_env import BatchedSubprocVecEnv, default_workers
 from foosball_gym.training.sb3.in_process_vec_env import InProcessVecEnv
@@ -56,9 +58,19 @@ VEC_ENVS = dict(
 )
 
 
+def _wrap(env: Any, rods_held_share: float, self_play: bool) -> Any:
+    if rods_held_share:
+        env = HeldRodsWrapper(env, rods_held_share)
+    return OpponentActionWrapper(env) if self_play else env
+
+
 def make_env(config: TrainConfig, seed_offset: int = 0) -> Any:
     """The vectorised training envs (with self-play and normalisation wrappers as configured)."""
-    wrapper = OpponentActionWrapper if config.self_play else None
+    wrapper = None
+    if config.self_play or config.rods_held_share:
+        wrapper = partial(
+            _wrap, rods_held_share=config.rods_held_share, self_play=bool(config.self_play)
+        )
     venv = make_vec_env(
         config.env_id,
         n_envs=config.n_envs,
