@@ -1,0 +1,64 @@
+"""Where a full-game learner from nothing starts: the action 0 of its action space, with the
+exploration noise of its first rollouts, against the scripted ladder.
+
+A policy network starts with its mean action near 0, and ``builtin:full-game-scratch`` reads
+every slide around the ball (``slide_around_ball``), so its starting team brings a figurine of
+every rod under the ball, feet down, and its exploring team adds Gaussian noise of the policy's
+starting spread. This plays that team, with and without noise, in continuous one-minute
+matches (seeds 0..N-1) against rungs of the ladder and prints the goals of each condition.
+
+    python benchmarks/full_game_start.py [--matches 10] [--opponents scripted:0 scripted:1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import gymnasium as gym
+import numpy as np
+
+import foosball_gym  # noqa: F401  (registers the environments)
+from foosball_gym.training.config_file import read_config_file
+
+# Standard deviations as fractions of the action's range: none, then exp(log_std_init) for
+# log_std_init -3.5, -3 and the settings file's -2.
+SPREADS = (0.0, math.exp(-3.5), math.exp(-3.0), math.exp(-2.0))
+
+
+def play(options: dict, opponent: str, sd: float, matches: int) -> tuple[int, int]:
+    """Goals for and against the action 0 with noise ``sd`` over ``matches`` seeded matches."""
+    env = gym.make("Foosball-FullGame-v0", continuous=True, opponent=opponent, **options)
+    rng = np.random.default_rng(0)
+    assert env.action_space.shape is not None
+    n = env.action_space.shape[0]
+    goals_for = goals_against = 0
+    for seed in range(matches):
+        env.reset(seed=seed)
+        done = False
+        while not done:
+            action = np.clip(rng.normal(0.0, sd, n), -1, 1).astype(np.float32)
+            _, _, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+        goals_for += info["goals_for"]
+        goals_against += info["goals_against"]
+    env.close()
+    return goals_for, goals_against
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--matches", type=int, default=10, help="one-minute matches a condition")
+    parser.add_argument("--opponents", nargs="+", default=["scripted:0", "scripted:1"])
+    args = parser.parse_args()
+    options = read_config_file("builtin:full-game-scratch")["env_kwargs"]
+    print(f"builtin:full-game-scratch's options: {options}")
+    print(f"{'opponent':<12} {'noise sd':>8} {'for':>5} {'against':>8}")
+    for opponent in args.opponents:
+        for sd in SPREADS:
+            goals_for, goals_against = play(options, opponent, sd, args.matches)
+            print(f"{opponent:<12} {sd:>8.3f} {goals_for:>5} {goals_against:>8}")
+
+
+if __name__ == "__main__":
+    main()
