@@ -22,8 +22,8 @@ import foosball_gym  # noqa: F401  (registers the environments)
 from foosball_gym.training.config_file import read_config_file
 
 # Standard deviations as fractions of the action's range: none, then exp(log_std_init) for
-# log_std_init -3.5, -3 and the settings file's -2.
-SPREADS = (0.0, math.exp(-3.5), math.exp(-3.0), math.exp(-2.0))
+# log_std_init -5, -3.5, -3 and the settings file's -2.
+SPREADS = (0.0, math.exp(-5.0), math.exp(-3.5), math.exp(-3.0), math.exp(-2.0))
 
 
 def play(options: dict, opponent: str, sd: float, matches: int) -> tuple[int, int]:
