@@ -15,35 +15,28 @@ from __future__ import annotations
 import argparse
 import math
 
-import gymnasium as gym
 import numpy as np
 
-import foosball_gym  # noqa: F401  (registers the environments)
+from foosball_gym.evaluation import evaluate
 from foosball_gym.training.config_file import read_config_file
 
 # Standard deviations as fractions of the action's range: none, then exp(log_std_init) for
 # log_std_init -5, -3.5, -3 and the settings file's -2.
 SPREADS = (0.0, math.exp(-5.0), math.exp(-3.5), math.exp(-3.0), math.exp(-2.0))
+ENV = "Foosball-FullGame-v0"
+ACTIONS = 8  # slide and spin of the four home rods
 
 
 def play(options: dict, opponent: str, sd: float, matches: int) -> tuple[int, int]:
     """Goals for and against the action 0 with noise ``sd`` over ``matches`` seeded matches."""
-    env = gym.make("Foosball-FullGame-v0", continuous=True, opponent=opponent, **options)
     rng = np.random.default_rng(0)
-    assert env.action_space.shape is not None
-    n = env.action_space.shape[0]
-    goals_for = goals_against = 0
-    for seed in range(matches):
-        env.reset(seed=seed)
-        done = False
-        while not done:
-            action = np.clip(rng.normal(0.0, sd, n), -1, 1).astype(np.float32)
-            _, _, terminated, truncated, info = env.step(action)
-            done = terminated or truncated
-        goals_for += info["goals_for"]
-        goals_against += info["goals_against"]
-    env.close()
-    return goals_for, goals_against
+
+    def team(obs: np.ndarray) -> np.ndarray:
+        return np.clip(rng.normal(0.0, sd, ACTIONS), -1, 1).astype(np.float32)
+
+    options = {**options, "continuous": True}
+    result = evaluate(team, ENV, options, episodes=matches, seed=0, opponent=opponent)
+    return result.goals_for, result.goals_against
 
 
 def main() -> None:

@@ -59,6 +59,9 @@ def test_holding_rods_leaves_the_serves_as_they_were():
     try:
         for seed in (0, 3):
             np.testing.assert_array_equal(plain.reset(seed=seed)[0], held.reset(seed=seed)[0])
+            # The next game's serve, unseeded, comes from the environment's own generator,
+            # which the draw of held rods must leave alone.
+            np.testing.assert_array_equal(plain.reset()[0], held.reset()[0])
     finally:
         plain.close()
         held.close()

@@ -3,8 +3,8 @@ rods it drives explore beside teammates that do not (``rods_held_share``).
 
 In the full game a team's exploration noise on its spins costs it most of its defence
 (docs/results/full-game.md), and the action 0 is a team of its own: rods centred, feet down,
-or with ``slide_around_ball`` a figurine of every rod under the ball. Holding a random part of
-the rods there in each game is the curriculum over rods the authors' newest code trains with.
+or with ``slide_around_ball`` a figurine of every rod under the ball. Each game holds a random
+part of the rods there, after the random subsets of rods the authors' newest code trains on.
 The policy is not told which rods are held; the evaluation and the shipped policy drive them
 all.
 """
@@ -53,6 +53,7 @@ class HeldRodsWrapper(gym.ActionWrapper):
         self._entry_rod = np.array([self.rods.index(rod) for rod, _ in joints])
         self._rng = np.random.default_rng()
         self.held = np.zeros(len(self.rods), dtype=bool)
+        self._held_entries: np.ndarray | None = None
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         if kwargs.get("seed") is not None:
@@ -61,9 +62,13 @@ class HeldRodsWrapper(gym.ActionWrapper):
         if held.all():
             held[self._rng.integers(len(self.rods))] = False
         self.held = held
+        # The entries to zero, found once a game rather than at every step.
+        self._held_entries = held[self._entry_rod] if held.any() else None
         return self.env.reset(**kwargs)
 
-    def action(self, action: Any) -> np.ndarray:
+    def action(self, action: Any) -> Any:
+        if self._held_entries is None:
+            return action
         action = np.array(action, dtype=np.float32)
-        action[self.held[self._entry_rod]] = 0.0
+        action[self._held_entries] = 0.0
         return action
