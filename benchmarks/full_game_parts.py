@@ -11,9 +11,10 @@ continuous one-minute matches (seeds 0..N-1), as it is and with:
   band reaches;
 - both.
 
-``--kicks`` also swings the midfield and offence through at a slow ball in reach in front of
-them, as the kicking team does. A replaced part that closes the goal says where the team's own
-action let the goals in.
+``--kicks`` also gives the midfield and offence the kicking team's spins: they swing through at
+a slow ball in reach in front of them, and lift their feet for a ball behind them moving
+forward. A replaced part that closes the goal says where the team's own action let the goals
+in.
 
     python benchmarks/full_game_parts.py [RUN] [--opponent scripted:1] [--matches 10]
         [--band 0.1 --skip 0] [--kicks]
@@ -28,16 +29,12 @@ import numpy as np
 
 from foosball_gym import table
 from foosball_gym.evaluation import evaluate
-from foosball_gym.policies.scripted import KICK_ANGLE, crossing_y
+from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.registration import check_env_options
 from foosball_gym.training.config_file import read_config_file
 
 ENV = "Foosball-FullGame-v0"
-RODS = [table.rod(f"{table.HOME}_{role}") for role in ("keeper", "defense", "midfield", "offense")]
-# The kicking team's reach in front of a rod and the speed below which it swings.
-REACH = (table.FIGURINE_SIZE[0] / 2 + table.BALL_RADIUS - 0.004, 0.075)
-SLOW = 1.5
-KICK = KICK_ANGLE / table.SPIN_LIMIT
+RODS = [f"{table.HOME}_{role}" for role in ("keeper", "defense", "midfield", "offense")]
 CONDITIONS = (
     ("as it is", False, False),
     ("keeper and defence spins at 0", True, False),
@@ -58,27 +55,30 @@ def slide_action(offset: float, band: float, skip: float) -> float:
 
 def parts(
     team: Callable[[np.ndarray], np.ndarray],
-    ball: list[int],
+    names: list[str],
     band: float,
     skip: float,
     back_still: bool,
     crossing: bool,
     kicks: bool,
 ) -> Callable[[np.ndarray], np.ndarray]:
-    """``team`` with the parts asked for replaced."""
+    """``team`` with the parts asked for replaced by the kicking team's."""
+    kicking = ScriptedTeam(names, RODS, joints="both")
+    ball = [names.index(f"ball_{k}") for k in ("x", "y", "vx", "vy")]
 
     def play(obs: np.ndarray) -> np.ndarray:
         action = np.array(team(obs), dtype=np.float32)
         x, y, vx, vy = (float(obs[i]) for i in ball)
-        for i, rod in enumerate(RODS):
+        for i, rod in enumerate(kicking.rods):
             if crossing:
-                cross = crossing_y(x, y, vx, vy, rod.x) if vx < -0.05 and x > rod.x else None
-                action[2 * i] = slide_action(0.0 if cross is None else cross - y, band, skip)
+                offset = ScriptedTeam.target_y(rod, x, y, vx, vy) - y
+                action[2 * i] = slide_action(offset, band, skip)
             if back_still and i < 2:
                 action[2 * i + 1] = 0.0
-            ahead = x - rod.x
-            if kicks and i >= 2 and REACH[0] < ahead < REACH[1] and vx * vx + vy * vy < SLOW**2:
-                action[2 * i + 1] = KICK
+            if kicks and i >= 2:
+                # Without the rod's joint values the kicking team swings at once, unwound.
+                spin = kicking.spin_for(rod, x, y, vx, vy, None)
+                action[2 * i + 1] = spin / table.SPIN_LIMIT
         return action
 
     return play
@@ -116,12 +116,11 @@ def main() -> None:
         parser.error("the team's slides must be read around the ball (slide_around_ball)")
     skip = float(options.get("slide_skip", 0.0))
     options["continuous"] = True
-    names = check_env_options(ENV, options).interface.builder.names
-    ball = [names.index(f"ball_{k}") for k in ("x", "y", "vx", "vy")]
+    names = list(check_env_options(ENV, options).interface.builder.names)
     print(f"{args.run or 'the action 0'} (band {band}, skip {skip}) against {args.opponent}")
     print(f"{'condition':<34} {'for':>4} {'against':>8}")
     for name, back_still, crossing in CONDITIONS:
-        player = parts(team, ball, band, skip, back_still, crossing, args.kicks)
+        player = parts(team, names, band, skip, back_still, crossing, args.kicks)
         result = evaluate(
             player, ENV, options, episodes=args.matches, seed=0, opponent=args.opponent
         )
