@@ -3,13 +3,15 @@
     python scripts/shot_lanes.py RUN [--episodes 200] [--seed 0] [--csv FILE]
 
 Plays ``Foosball-Score-v0`` with the options the policy was trained with (which must place
-obstacles) on the seeded balls ``seed .. seed + episodes - 1``, and sorts each ball by whether a
-straight kick along the table would pass every standing figurine and go in: the aiming keeper's
-own clearance test (:func:`foosball_gym.policies.aiming.clearance`), judged on the reset's
-observation. Each ball's first shot is the ball's velocity at the first step it runs faster
-than 1 m/s towards the goal. It prints the goals for and against, the goals on open and on shut
-lanes, and how many first shots left more than 5 degrees off the table's axis, with how many
-goals began with one; ``--csv`` writes one row per ball.
+obstacles) but for the shares that chose its balls and rods (``obstacle_share``,
+``shut_lane_share``), on the task's own seeded balls ``seed .. seed + episodes - 1`` with every
+rod standing, and sorts each ball by whether a straight kick along the table would pass every
+standing figurine and go in: the aiming keeper's own clearance test
+(:func:`foosball_gym.policies.aiming.clearance`), judged on the reset's observation. Each
+ball's first shot is the ball's velocity at the first step it runs faster than 1 m/s towards
+the goal. It prints the goals for and against, the goals on open and on shut lanes, and how
+many first shots left more than 5 degrees off the table's axis, with how many goals began with
+one; ``--csv`` writes one row per ball.
 
 ``RUN`` is what ``foosball eval`` takes (a run folder, a model, ``builtin:NAME``), or
 ``scripted`` for the task's scripted keeper, which aims.
@@ -158,6 +160,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         if loaded.env_id != ENV_ID:
             parser.error(f"{args.run} was trained on {loaded.env_id}; this script plays {ENV_ID}")
         env_kwargs, policy, reset = dict(loaded.env_kwargs), loaded, loaded.reset
+        # The task's own balls, every rod standing, whatever share the run trained on.
+        env_kwargs.pop("obstacle_share", None)
+        env_kwargs.pop("shut_lane_share", None)
     if not env_kwargs.get("obstacles"):
         parser.error(f"{args.run} was trained without obstacles: no lane to sort the balls by")
     try:

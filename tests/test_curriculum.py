@@ -8,6 +8,7 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from scripts_loader import load_script
 
 import foosball_gym  # noqa: F401  (registers the environments)
 from foosball_gym.training.config import TrainConfig
@@ -148,6 +149,36 @@ def test_a_curriculum_over_the_obstacles_ends_at_the_runs_own_share():
         config = TrainConfig("Foosball-Score-v0", kwargs, curriculum=start, curriculum_steps=10)
         with pytest.raises(ValueError, match=message):
             config.check()
+
+
+def test_a_curriculum_over_shut_lanes_ends_at_the_tasks_own_balls():
+    from foosball_gym.training.curriculum import run_serves
+
+    kwargs = {"obstacles": True}
+    config = TrainConfig(
+        "Foosball-Score-v0", kwargs, curriculum={"shut_lane_share": 1.0}, curriculum_steps=10
+    )
+    config.check()
+    assert run_serves("Foosball-Score-v0", kwargs, ["shut_lane_share"]) == {"shut_lane_share": 0.0}
+    incoming = {"obstacles": True, "ball_start": "incoming"}
+    config = TrainConfig(
+        "Foosball-Score-v0", incoming, curriculum={"shut_lane_share": 1.0}, curriculum_steps=10
+    )
+    with pytest.raises(ValueError, match="unknown serve option 'shut_lane_share'"):
+        config.check()
+
+
+def test_the_shut_lane_share_changes_from_the_next_reset_on():
+    lanes = load_script("shot_lanes")
+    env = gym.make("Foosball-Score-v0", obstacles=True)
+    names = list(env.unwrapped.obs_builder.names)
+    env.unwrapped.set_serves(shut_lane_share=1.0)
+    assert not any(lanes.straight_lane_open(names, env.reset(seed=s)[0]) for s in range(30))
+    with pytest.raises(ValueError, match="shut_lane_share must be a number in"):
+        env.unwrapped.set_serves(shut_lane_share=2.0)
+    env.unwrapped.set_serves(shut_lane_share=0.0)
+    assert any(lanes.straight_lane_open(names, env.reset(seed=s)[0]) for s in range(30))
+    env.close()
 
 
 def test_the_serves_move_in_a_straight_line_and_then_stay():

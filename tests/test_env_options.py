@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
+from scripts_loader import load_script
 
 from foosball_gym import ENV_IDS
 from foosball_gym.registration import check_env_options
@@ -155,6 +156,27 @@ def test_each_obstacle_rod_stands_with_the_obstacle_share_and_all_do_by_default(
         assert list(every.unwrapped.game.positions[5:8]) == [0.0] * 3
 
 
+def test_a_shut_lane_share_of_one_shuts_every_straight_lane_and_none_is_the_default(make_env):
+    straight_lane_open = load_script("shot_lanes").straight_lane_open
+    env = make_env("Foosball-Score-v0", obstacles=True, shut_lane_share=1.0)
+    names = list(env.unwrapped.obs_builder.names)
+    assert not any(straight_lane_open(names, env.reset(seed=s)[0]) for s in range(40))
+    # The default, 0, draws nothing more: the task's own balls, a third of them open.
+    default = make_env("Foosball-Score-v0", obstacles=True)
+    none = make_env("Foosball-Score-v0", obstacles=True, shut_lane_share=0.0)
+    opened = 0
+    for seed in range(40):
+        obs = default.reset(seed=seed)[0]
+        assert none.reset(seed=seed)[0] == pytest.approx(obs)
+        opened += straight_lane_open(names, obs)
+    assert 5 <= opened <= 25  # 36 % of 40: 14.6 ± 3.5 sigma
+    # A ball or obstacles the user placed stay where they were put.
+    placed = {"ball_position": (-0.497, 0.0), "obstacle_positions": (0.1, 0.1, 0.1)}
+    obs, _ = env.reset(seed=0, options=placed)
+    assert obs[names.index("ball_y")] == pytest.approx(0.0, abs=1e-3)
+    assert obs[-3:] == pytest.approx([0.1, 0.1, 0.1], abs=2e-3)
+
+
 def test_figurine_observation_follows_the_rod(make_env):
     env = make_env("Foosball-Block-v0", observe_figurines=True)
     obs, _ = env.reset(options={"ball_position": (0.3, 0.2), "ball_velocity": (0.0, 0.0)})
@@ -178,6 +200,13 @@ def test_figurine_observation_follows_the_rod(make_env):
         ("Foosball-Score-v0", {"obstacles": "yes"}, "True or False"),
         ("Foosball-Score-v0", {"obstacles": True, "obstacle_share": 1.5}, "obstacle_share"),
         ("Foosball-Score-v0", {"obstacle_share": 0.5}, "obstacle_share 0.5 needs obstacles=True"),
+        ("Foosball-Score-v0", {"obstacles": True, "shut_lane_share": -0.1}, "shut_lane_share"),
+        ("Foosball-Score-v0", {"shut_lane_share": 0.5}, "needs obstacles=True and ball_start"),
+        (
+            "Foosball-Score-v0",
+            {"obstacles": True, "ball_start": "incoming", "shut_lane_share": 1.0},
+            "ball_start='resting'",
+        ),
         ("Foosball-Block-v0", {"opponent_prismatic_only": True}, "only to tasks with an opponent"),
         ("Foosball-FullGame-v0", {"continuous": 1}, "True or False"),
         ("Foosball-KeeperVsKeeper-v0", {"stagnation_steps": -1}, "non-negative"),

@@ -64,6 +64,9 @@ class ScoreEnv(FoosballEnv):
       stands in the ball's way at a reset; the others are spun up a quarter turn, their
       figurines level above the ball (a curriculum over the rods: the observation still
       gives their slides).
+    - `shut_lane_share`: with obstacles and the ball at rest, the chance, in [0, 1], that a
+      reset is drawn again until a straight kick from the ball would meet a standing figurine
+      or miss the mouth (a curriculum towards the aimed shot; 0, the task's own balls).
     - `speed_range`: the incoming shots' speeds in m/s, `(low, high)`, drawn uniformly; at
       most 20, the fastest ball the table is built for.
     - `serve_x_range`: where along the table an incoming ball starts, `(low, high)` in m,
@@ -99,6 +102,7 @@ class ScoreEnv(FoosballEnv):
     - v0: `safety_layer`, on by default with `estimated_state`: an environment on estimated
       state plays like `foosball play`, its targets shaped by the real table's safety layer.
     - v0: `obstacle_share`, 1 by default (episodes as before, seed for seed).
+    - v0: `shut_lane_share`, 0 by default (episodes as before, seed for seed).
     """
 
     # The authors' scoring tasks regularise the action.
@@ -110,6 +114,7 @@ class ScoreEnv(FoosballEnv):
         ball_start: Literal["resting", "incoming"] = "resting",
         obstacles: bool = False,
         obstacle_share: float = 1.0,
+        shut_lane_share: float = 0.0,
         speed_range: tuple[float, float] = (3.0, 7.0),
         serve_x_range: tuple[float, float] = (0.0, 0.4),
         serve_y_range: tuple[float, float] = (-0.3, 0.3),
@@ -125,6 +130,7 @@ class ScoreEnv(FoosballEnv):
                 ball_start=ball_start,
                 obstacles=obstacles,
                 obstacle_share=obstacle_share,
+                shut_lane_share=shut_lane_share,
                 speed_range=speed_range,
                 serve_x_range=serve_x_range,
                 serve_y_range=serve_y_range,

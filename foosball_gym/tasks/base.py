@@ -171,8 +171,8 @@ class Task:
             raise ValueError(
                 f"{type(self).__name__.removesuffix('Task')} with these options serves no shots "
                 "whose options could change (Block does, and Score with ball_start='incoming'; "
-                "Score with obstacles=True changes only its obstacle_share, keeper against "
-                "keeper its home_serve_share)"
+                "Score with obstacles=True changes only its obstacle_share and shut_lane_share, "
+                "keeper against keeper its home_serve_share)"
             )
         self.shots = shots.changed(**options)
 

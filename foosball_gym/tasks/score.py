@@ -9,6 +9,7 @@ from typing import Any, Literal
 import numpy as np
 
 from foosball_gym import table
+from foosball_gym.policies.aiming import clearance
 from foosball_gym.policies.scripted import ScriptedTeam
 from foosball_gym.policy_io.observations import check_flag
 from foosball_gym.policy_io.task import Layout
@@ -19,6 +20,21 @@ BALL_STARTS = ("resting", "incoming")
 OBSTACLES = ("away_keeper", "away_defense", "away_offense")
 # A quarter turn holds a rod's figurines level, their soles well above the ball.
 SPUN_UP = float(np.pi / 2)
+# Redraws for a shut lane before the last draw is kept: a straight lane is open for about
+# a third of the resting balls, so 50 fail together about once in 10^9 resets.
+MAX_REDRAWS = 50
+
+
+def straight_lane_open(start: Start) -> bool:
+    """Whether a straight kick from where a resting ball starts passes every standing
+    obstacle and goes in, as the aiming keeper judges it."""
+    blockers = [
+        (table.rod(name).x, table.rod(name).figurine_y(slide))
+        for name, slide, spin in zip(OBSTACLES, start.slide[1:], start.spin[1:])
+        if spin == 0.0
+    ]
+    x, y = start.ball_position
+    return clearance(float(x), float(y), 0.0, blockers) > 0.0
 
 
 class ScoreTask(Task):
@@ -32,6 +48,7 @@ class ScoreTask(Task):
         ball_start: Literal["resting", "incoming"] = "resting",
         obstacles: bool = False,
         obstacle_share: float = 1.0,
+        shut_lane_share: float = 0.0,
         speed_range: tuple[float, float] = (3.0, 7.0),
         serve_x_range: tuple[float, float] = (0.0, 0.4),
         serve_y_range: tuple[float, float] = (-0.3, 0.3),
@@ -49,6 +66,13 @@ class ScoreTask(Task):
                 f"obstacle_share {obstacle_share!r} needs obstacles=True: it is the chance that "
                 "each obstacle rod stands in the ball's way"
             )
+        self.shut_lane_share = check_share("shut_lane_share", shut_lane_share)
+        if self.shut_lane_share and not (self.obstacles and ball_start == "resting"):
+            raise ValueError(
+                f"shut_lane_share {shut_lane_share!r} needs obstacles=True and "
+                "ball_start='resting': it is the chance that a resting ball's straight lane "
+                "to the goal is shut by a standing figurine"
+            )
         self.shots = Shots.checked(
             speed_range,
             serve_x_range,
@@ -63,6 +87,24 @@ class ScoreTask(Task):
         self.layout = Layout(controlled=("home_keeper",), joints="both", static=self.extras)
 
     def sample_start(
+        self,
+        rng: np.random.Generator,
+        ball_position=None,
+        ball_velocity=None,
+        options: dict[str, Any] | None = None,
+    ) -> Start:
+        start = self._sample_start(rng, ball_position, ball_velocity, options)
+        placed = ball_position is not None or (options or {}).get("obstacle_positions") is not None
+        # No draw at a share of 0, so that the task's own episodes stay as they were.
+        if not self.shut_lane_share or placed or rng.random() >= self.shut_lane_share:
+            return start
+        for _ in range(MAX_REDRAWS):
+            if not straight_lane_open(start):
+                break
+            start = self._sample_start(rng, None, ball_velocity, options)
+        return start
+
+    def _sample_start(
         self,
         rng: np.random.Generator,
         ball_position=None,
@@ -144,20 +186,30 @@ class ScoreTask(Task):
 
     def serve_options(self) -> dict[str, Any]:
         own = super().serve_options()
-        return {**own, "obstacle_share": self.obstacle_share} if self.obstacles else own
+        if not self.obstacles:
+            return own
+        shares = {"obstacle_share": self.obstacle_share}
+        if self.ball_start == "resting":
+            shares["shut_lane_share"] = self.shut_lane_share
+        return {**own, **shares}
 
     def set_serves(self, **options: Any) -> None:
-        """As :meth:`Task.set_serves`, and with obstacles ``obstacle_share`` too."""
-        if "obstacle_share" not in options:
+        """As :meth:`Task.set_serves`, and with obstacles ``obstacle_share`` (and, the ball at
+        rest, ``shut_lane_share``) too."""
+        names = [n for n in ("obstacle_share", "shut_lane_share") if n in options]
+        if not names:
             super().set_serves(**options)
             return
         if not self.obstacles:
-            raise ValueError("obstacle_share needs obstacles=True")
+            raise ValueError(f"{names[0]} needs obstacles=True")
+        if "shut_lane_share" in names and self.ball_start != "resting":
+            raise ValueError("shut_lane_share needs ball_start='resting'")
         # Every value checked before any changes.
-        share = check_share("obstacle_share", options.pop("obstacle_share"))
+        shares = {n: check_share(n, options.pop(n)) for n in names}
         if options:
             super().set_serves(**options)
-        self.obstacle_share = share
+        for name, share in shares.items():
+            setattr(self, name, share)
 
     def scripted_policy(self, names: Sequence[str], precise_state: bool = True) -> ScriptedTeam:
         """The scripted keeper, deflecting incoming balls to the goal (or striking them where

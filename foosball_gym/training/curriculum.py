@@ -1,10 +1,11 @@
 """A curriculum over serves: a run's incoming shots start easier and become the task's own.
 
 ``TrainConfig.curriculum`` names serve options (``speed_range``, ``serve_x_range``, ...;
-Score with obstacles its ``obstacle_share``, keeper against keeper its ``home_serve_share``)
-with the values the run starts from; over its first ``curriculum_steps`` steps each moves in a
-straight line to the run's own value (its ``env_kwargs``', or the environment's default), and
-stays there. Needs no simulator: the values are checked as the environment checks them.
+Score with obstacles its ``obstacle_share`` and, the ball at rest, its ``shut_lane_share``;
+keeper against keeper its ``home_serve_share``) with the values the run starts from; over its
+first ``curriculum_steps`` steps each moves in a straight line to the run's own value (its
+``env_kwargs``', or the environment's default), and stays there. Needs no simulator: the
+values are checked as the environment checks them.
 """
 
 from __future__ import annotations
