@@ -88,3 +88,24 @@ def test_the_command_writes_a_row_a_ball_and_refuses_a_policy_without_obstacles(
     with pytest.raises(SystemExit):
         lanes.main(["builtin:score-resting", "--episodes", "1"])
     assert "without obstacles" in capsys.readouterr().err
+
+
+def test_a_run_trained_on_shut_lanes_is_judged_on_the_tasks_own_balls(
+    lanes, tmp_path, monkeypatch, capsys
+):
+    class Trained:
+        env_id = lanes.ENV_ID
+        env_kwargs = {**OBSTACLES, "shut_lane_share": 1.0, "obstacle_share": 0.5}
+        reset = None
+
+        def __call__(self, obs):
+            return np.zeros(2, dtype=np.float32)
+
+    monkeypatch.setattr(lanes.foosball_gym, "load_policy", lambda run, trust=False: Trained())
+    out = tmp_path / "balls.csv"
+    lanes.main(["runs/shut", "--episodes", "6", "--csv", str(out)])
+    capsys.readouterr()
+    judged = [r.split(",")[1] == "True" for r in out.read_text().splitlines()[1:]]
+    own = [b.lane_open for b in lanes.play(Trained(), OBSTACLES, 6, seed=0)]
+    assert judged == own
+    assert any(own)  # a run's own balls here would all be shut

@@ -21,7 +21,7 @@ OBSTACLES = ("away_keeper", "away_defense", "away_offense")
 # A quarter turn holds a rod's figurines level, their soles well above the ball.
 SPUN_UP = float(np.pi / 2)
 # Redraws for a shut lane before the last draw is kept: a straight lane is open for about
-# a third of the resting balls, so 50 fail together about once in 10^9 resets.
+# a third of the resting balls, so 50 open ones in a row come about once in 10^22 resets.
 MAX_REDRAWS = 50
 
 
