@@ -170,11 +170,12 @@ def test_a_shut_lane_share_of_one_shuts_every_straight_lane_and_none_is_the_defa
         assert none.reset(seed=seed)[0] == pytest.approx(obs)
         opened += straight_lane_open(names, obs)
     assert 5 <= opened <= 25  # 36 % of 40: 14.6 ± 3.5 sigma
-    # A ball or obstacles the user placed stay where they were put.
-    placed = {"ball_position": (-0.497, 0.0), "obstacle_positions": (0.1, 0.1, 0.1)}
+    # A ball and obstacles the user placed stay where they were put, its straight lane open.
+    placed = {"ball_position": (-0.497, 0.0), "obstacle_positions": (0.06, 0.09, 0.06)}
     obs, _ = env.reset(seed=0, options=placed)
     assert obs[names.index("ball_y")] == pytest.approx(0.0, abs=1e-3)
-    assert obs[-3:] == pytest.approx([0.1, 0.1, 0.1], abs=2e-3)
+    assert obs[-3:] == pytest.approx([0.06, 0.09, 0.06], abs=2e-3)
+    assert straight_lane_open(names, obs)
 
 
 def test_figurine_observation_follows_the_rod(make_env):

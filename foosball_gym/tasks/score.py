@@ -28,9 +28,10 @@ MAX_REDRAWS = 50
 def straight_lane_open(start: Start) -> bool:
     """Whether a straight kick from where a resting ball starts passes every standing
     obstacle and goes in, as the aiming keeper judges it."""
+    rods = (table.rod(name) for name in OBSTACLES)
     blockers = [
-        (table.rod(name).x, table.rod(name).figurine_y(slide))
-        for name, slide, spin in zip(OBSTACLES, start.slide[1:], start.spin[1:])
+        (rod.x, rod.figurine_y(slide))
+        for rod, slide, spin in zip(rods, start.slide[1:], start.spin[1:])
         if spin == 0.0
     ]
     x, y = start.ball_position
