@@ -4,10 +4,9 @@ The scripted aiming keeper of Score with obstacles (``Foosball-Score-v0``, ball 
 ``obstacles=True``), and the same keeper kicking straight only, play the seeded balls
 ``seed .. seed + episodes - 1`` with Gaussian noise added to their actions at every step, as a
 PPO learner's exploring policy adds it to its mean: on both entries, on the slide alone and on
-the spin alone. The noise is in the action's
-own units, each entry in [-1, 1]: a slide of 1 is 12.3 cm of the rod's travel, a spin of 1 is
-2 pi of its turn. It prints the success of each condition with its Wilson interval, and the
-goals for and against.
+the spin alone. The noise is in the action's own units, each entry in [-1, 1]: a slide of 1 is
+12.3 cm of the rod's travel, a spin of 1 is 2 pi of its turn. It prints the success of each
+condition with its Wilson interval, and the goals for and against.
 
     python benchmarks/aiming_noise.py [--episodes 200] [--seed 0]
 """
@@ -27,8 +26,8 @@ from foosball_gym.policies.scripted import ScriptedTeam
 
 ENV = "Foosball-Score-v0"
 OPTIONS: dict[str, Any] = {"ball_start": "resting", "obstacles": True}
-# Standard deviations in the action's units: none, then from a tenth of a millimetre of slide
-# to exp(-1), the starting spread of builtin:score-obstacles-scratch.
+# Standard deviations in the action's units: none, then from 0.4 mm of slide to exp(-1), the
+# starting spread of builtin:score-obstacles-scratch.
 SPREADS = (0.0, 0.003, 0.01, 0.03, 0.1, math.exp(-1.0))
 ENTRIES = (("both", (0, 1)), ("slide", (0,)), ("spin", (1,)))
 KEEPERS = ("aiming", "straight")

@@ -33,7 +33,7 @@ def test_a_held_slide_is_an_aim_only_when_the_slide_is_read_around_the_ball(aims
         aims.check_options({**OPTIONS, "obstacles": False})
 
 
-def test_the_slide_is_held_and_the_spin_is_the_policys(aims):
+def test_a_keeper_that_never_swings_scores_with_no_held_aim(aims):
     seen = []
 
     def still(obs):
