@@ -26,7 +26,6 @@ import gymnasium as gym
 import numpy as np
 
 import foosball_gym
-from foosball_gym.evaluation import evaluate
 
 ENV_ID = "Foosball-Score-v0"
 STRAIGHT = 0.1  # held slide values this near 0 kick straight
@@ -60,23 +59,24 @@ def check_options(env_kwargs: dict[str, Any]) -> None:
 def scan(
     policy: Callable[[np.ndarray], Any],
     reset: Callable[[], None] | None,
-    env_kwargs: dict[str, Any],
+    env: gym.Env,
     seed: int,
     grid: np.ndarray,
 ) -> np.ndarray:
-    """Whether the ball of ``seed`` is scored with the slide action held at each of ``grid``."""
+    """Whether ``env``'s ball of ``seed`` is scored with the slide action held at each of
+    ``grid``, the spin the policy's."""
     hits = np.zeros(len(grid), bool)
     for i, held in enumerate(grid):
         if reset is not None:
             reset()
-
-        def aimed(obs: np.ndarray, held: float = float(held)) -> np.ndarray:
+        obs, _ = env.reset(seed=seed)
+        done, info = False, {}
+        while not done:
             action = np.array(policy(obs), np.float32)
             action[0] = held
-            return action
-
-        result = evaluate(aimed, ENV_ID, env_kwargs, episodes=1, seed=seed)
-        hits[i] = result.success_rate > 0
+            obs, _, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+        hits[i] = info.get("goal") == 1
     return hits
 
 
@@ -93,15 +93,14 @@ def main(argv: Sequence[str] | None = None) -> None:
     loaded = foosball_gym.load_policy(args.run, trust=args.trust)
     if loaded.env_id != ENV_ID:
         parser.error(f"{args.run} was trained on {loaded.env_id}; this script plays {ENV_ID}")
-    options = {
-        k: v for k, v in loaded.env_kwargs.items() if k not in ("obstacle_share", "shut_lane_share")
-    }
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from shot_lanes import straight_lane_open, task_balls  # a script beside this one
+
+    options = task_balls(loaded.env_kwargs)
     try:
         check_options(options)
     except ValueError as error:
         parser.error(str(error))
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from shot_lanes import straight_lane_open  # a script beside this one
 
     grid = np.linspace(-1.0, 1.0, args.points)
     step = float(grid[1] - grid[0])
@@ -115,7 +114,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         obs, _ = env.reset(seed=ball)
         if straight_lane_open(names, obs):
             continue
-        hits = scan(loaded, loaded.reset, options, ball, grid)
+        hits = scan(loaded, loaded.reset, env, ball, grid)
         runs = windows(list(hits))
         wide = max(runs, default=0) * step
         near = int(hits[np.abs(grid) <= STRAIGHT + 1e-9].sum())

@@ -22,7 +22,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import astuple, dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -63,6 +63,12 @@ def straight_lane_open(names: Sequence[str], obs: np.ndarray) -> bool:
         )
     x, y = float(obs[names.index("ball_x")]), float(obs[names.index("ball_y")])
     return clearance(x, y, 0.0, blockers) > 0.0
+
+
+def task_balls(env_kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """A run's options with the task's own balls and every rod standing, whatever shares of
+    them (``obstacle_share``, ``shut_lane_share``) it trained on."""
+    return {k: v for k, v in env_kwargs.items() if k not in ("obstacle_share", "shut_lane_share")}
 
 
 def play(
@@ -159,10 +165,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         loaded = foosball_gym.load_policy(args.run, trust=args.trust)
         if loaded.env_id != ENV_ID:
             parser.error(f"{args.run} was trained on {loaded.env_id}; this script plays {ENV_ID}")
-        env_kwargs, policy, reset = dict(loaded.env_kwargs), loaded, loaded.reset
-        # The task's own balls, every rod standing, whatever share the run trained on.
-        env_kwargs.pop("obstacle_share", None)
-        env_kwargs.pop("shut_lane_share", None)
+        env_kwargs, policy, reset = task_balls(loaded.env_kwargs), loaded, loaded.reset
     if not env_kwargs.get("obstacles"):
         parser.error(f"{args.run} was trained without obstacles: no lane to sort the balls by")
     try:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from scripts_loader import load_script
@@ -41,34 +42,35 @@ def test_a_keeper_that_never_swings_scores_with_no_held_aim(aims):
         return np.array([0.7, 0.0], np.float32)
 
     resets = []
-    hits = aims.scan(still, lambda: resets.append(1), OPTIONS, seed=1, grid=np.array([-0.5, 0.5]))
-    # A keeper whose feet never swing strikes nothing: no held aim scores.
+    env = gym.make("Foosball-Score-v0", **OPTIONS)
+    hits = aims.scan(still, lambda: resets.append(1), env, seed=1, grid=np.array([-0.5, 0.5]))
+    env.close()
     assert hits.tolist() == [False, False]
     assert len(resets) == 2 and seen
 
 
-def test_each_held_value_is_played_on_the_ball_and_its_goal_counted(aims, monkeypatch):
-    played = []
+class OneStepBall:
+    """Scores in one step when the slide it is given is above 0; records what it is given."""
 
-    class Result:
-        def __init__(self, scored):
-            self.success_rate = 1.0 if scored else 0.0
+    def __init__(self):
+        self.resets, self.actions = [], []
 
-    def fake_evaluate(policy, env_id, env_kwargs, episodes, seed):
-        action = policy(np.zeros(11, np.float32))
-        played.append((env_id, seed, episodes, action.tolist()))
-        return Result(scored=action[0] > 0)
+    def reset(self, seed=None):
+        self.resets.append(seed)
+        return np.zeros(11, np.float32), {}
 
-    monkeypatch.setattr(aims, "evaluate", fake_evaluate)
+    def step(self, action):
+        self.actions.append(np.asarray(action).tolist())
+        return np.zeros(11, np.float32), 0.0, True, False, {"goal": int(action[0] > 0)}
 
+
+def test_each_held_value_is_played_on_the_ball_and_its_goal_counted(aims):
     def keeper(obs):
         return np.array([0.3, -0.25], np.float32)
 
-    hits = aims.scan(keeper, None, OPTIONS, seed=7, grid=np.array([-0.5, 0.0, 0.75]))
+    env = OneStepBall()
+    hits = aims.scan(keeper, None, env, seed=7, grid=np.array([-0.5, 0.0, 0.75]))
     assert hits.tolist() == [False, False, True]
-    # The slide is the held value and the spin the keeper's own, ball after ball the same one.
-    assert played == [
-        ("Foosball-Score-v0", 7, 1, [-0.5, -0.25]),
-        ("Foosball-Score-v0", 7, 1, [0.0, -0.25]),
-        ("Foosball-Score-v0", 7, 1, [0.75, -0.25]),
-    ]
+    # The same ball each time, the slide the held value and the spin the keeper's own.
+    assert env.resets == [7, 7, 7]
+    assert env.actions == [[-0.5, -0.25], [0.0, -0.25], [0.75, -0.25]]

@@ -109,3 +109,9 @@ def test_a_run_trained_on_shut_lanes_is_judged_on_the_tasks_own_balls(
     own = [b.lane_open for b in lanes.play(Trained(), OBSTACLES, 6, seed=0)]
     assert judged == own
     assert any(own)  # a run's own balls here would all be shut
+
+
+def test_the_task_balls_drop_the_shares_a_run_trained_on_and_keep_its_other_options(lanes):
+    trained = {**OBSTACLES, "obstacle_share": 0.5, "shut_lane_share": 1.0, "slide_skip": 0.009}
+    assert lanes.task_balls(trained) == {**OBSTACLES, "slide_skip": 0.009}
+    assert "shut_lane_share" in trained  # the run's own options are left as they were
