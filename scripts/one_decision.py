@@ -65,7 +65,9 @@ class OneDecision:
     serves."""
 
     def __init__(self, decision: Sequence[float] | np.ndarray) -> None:
-        self.v, self.back, switch, self.forward = (float(x) for x in decision)
+        v, back, switch, forward = (float(x) for x in decision)
+        self.first = np.array([v, back], np.float32)
+        self.second = np.array([v, forward], np.float32)
         self.switch = int(switch)
         self.steps = 0
 
@@ -73,9 +75,8 @@ class OneDecision:
         self.steps = 0
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        spin = self.back if self.steps < self.switch else self.forward
         self.steps += 1
-        return np.array([self.v, spin], np.float32)
+        return self.first if self.steps <= self.switch else self.second
 
 
 def layout(names: Sequence[str], obs: np.ndarray) -> np.ndarray:
