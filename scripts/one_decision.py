@@ -1,8 +1,8 @@
 """Score with obstacles as one decision a serve, learned by a model of which decisions score.
 
     python scripts/one_decision.py [--layouts 8000] [--tries 10] [--rounds 1] [--keep 5]
-        [--spin BACK,SWITCH,FORWARD] [--train-seed 10000] [--episodes 200] [--seed 0]
-        [--workers 2]
+        [--spin BACK,SWITCH,FORWARD] [--train-seed 10000] [--model-seed 0] [--episodes 200]
+        [--seed 0] [--workers 2]
 
 Not the per-step policy that PPO learns: here the keeper's whole serve is one decision, made on
 the reset's observation and then played open loop. The decision is the slide, held at ``v`` in
@@ -246,6 +246,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         help="one spin for every trial, BACK,SWITCH,FORWARD (e.g. -0.3,4,0.3)",
     )
     parser.add_argument("--train-seed", type=int, default=10_000, help="the first training ball")
+    parser.add_argument("--model-seed", type=int, default=0, help="the network's first weights")
     parser.add_argument("--epochs", type=int, default=40)
     parser.add_argument("--episodes", type=int, default=200, help="balls played")
     parser.add_argument("--seed", type=int, default=0, help="the first ball played")
@@ -282,7 +283,7 @@ def main(argv: Sequence[str] | None = None) -> None:
             f"{time.perf_counter() - start:.0f} s on {args.workers} processes"
         )
         rows, decisions, goals = (np.concatenate([p[i] for p in parts]) for i in range(3))
-        model = OutcomeModel(rows, decisions)
+        model = OutcomeModel(rows, decisions, args.model_seed)
         start = time.perf_counter()
         last, held = model.fit(rows, decisions, goals, args.epochs, args.tries)
         print(

@@ -102,3 +102,10 @@ def test_rounds_narrow_the_spins_and_each_is_played(one, capsys):
     assert out.count("the model's decision: ") == 2
     assert out.count("balls 3: scored ") == 3
     assert "one decision on every ball (v " in out
+
+
+def test_the_model_seed_sets_the_first_weights(one):
+    rows = np.zeros((4, 8), np.float32)
+    decisions = np.zeros((4, 4), np.float32)
+    first = [one.OutcomeModel(rows, decisions, seed).net[0].weight for seed in (1, 1, 2)]
+    assert (first[0] == first[1]).all() and not (first[0] == first[2]).all()
