@@ -27,6 +27,7 @@ import tempfile
 import textwrap
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -264,16 +265,23 @@ def _append(path: Path, rows: list[dict[str, object]]) -> None:
         writer.writerows(rows)
 
 
+def budget_of(steps: int) -> int:
+    """The budget a run's ``steps`` belong to: the steps to two significant figures, so that
+    runs of a budget counted in serves, whose steps differ by the serves' lengths, share a cell
+    (every budget of the PPO recipes is already so round)."""
+    return int(float(f"{steps:.2g}"))
+
+
 def aggregate(rows: list[dict[str, str]], reps: int = 2000) -> dict[tuple[str, int], dict]:
-    """For each (task, budget): seeds, the interquartile mean of success and its 95 %
-    stratified-bootstrap interval, median, min and wall seconds' median."""
+    """For each (task, :func:`budget_of` the steps): seeds, the interquartile mean of success
+    and its 95 % stratified-bootstrap interval, median, min and wall seconds' median."""
     import numpy as np
     from rliable import library as rly
     from rliable import metrics
 
     cells: dict[tuple[str, int], list[dict[str, str]]] = {}
     for row in rows:
-        cells.setdefault((row["task"], int(row["env_steps"])), []).append(row)
+        cells.setdefault((row["task"], budget_of(int(row["env_steps"]))), []).append(row)
     out = {}
     for key, cell in sorted(cells.items()):
         scores = np.array([[float(r["success"])] for r in cell])
@@ -345,7 +353,7 @@ def _plot(table: dict[tuple[str, int], dict], rows: list[dict[str, str]], images
         ax.minorticks_off()
         ax.set_xlabel("env steps")
         ax.set_ylabel(f"success, {EVAL_EPISODES} episodes (%)")
-        ax.set_title(_title(task), fontsize=8)
+        ax.set_title(_title(task, rows), fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(loc="lower right", fontsize=8)
         fig.tight_layout()
@@ -359,11 +367,15 @@ def _short(steps: int) -> str:
     return f"{steps / 1e6:g}M" if steps >= 1_000_000 else f"{steps // 1000}k"
 
 
-def _title(task: str) -> str:
-    """The task and the whole command line of its recipe, wrapped to fit the plot."""
-    if task not in TASKS:
-        return task
-    recipe = " ".join((TASKS[task].recipe, *TASKS[task].options))
+def _title(task: str, rows: Sequence[dict[str, str]] = ()) -> str:
+    """The task and the whole command line of its recipe, wrapped to fit the plot: for a task
+    that ``train`` does not run, its rows' ``config``."""
+    if task in TASKS:
+        recipe = " ".join((TASKS[task].recipe, *TASKS[task].options))
+    else:
+        recipe = next((r["config"] for r in rows if r["task"] == task and r.get("config")), "")
+        if not recipe:
+            return task
     return "\n".join(textwrap.wrap(f"{task}: {recipe}", 70))
 
 

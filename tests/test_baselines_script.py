@@ -109,3 +109,23 @@ def test_a_task_s_options_go_into_its_command(baselines, tmp_path: Path) -> None
     command = baselines.train_command(task, 2, tmp_path)
     assert command[:5] == ["foosball", "train", "Foosball-Block-v0", "--config", task.recipe]
     assert command[5:7] == ["--learner", "torch"]
+
+
+def test_runs_whose_steps_differ_by_a_serves_length_share_their_budgets_cell(baselines) -> None:
+    rows = [
+        {"task": "serves", "env_steps": str(n), "success": "0.8", "wall_seconds": "900"}
+        for n in (10_886_578, 10_848_360, 10_912_004)
+    ]
+    rows.append({"task": "block", "env_steps": "300000", "success": "1", "wall_seconds": "30"})
+    table = baselines.aggregate(rows, reps=50)
+    assert sorted(table) == [("block", 300_000), ("serves", 11_000_000)]
+    assert table[("serves", 11_000_000)]["seeds"] == 3
+    budgets = (100_000, 500_000, 6_000_000, 30_000_000)
+    assert [baselines.budget_of(n) for n in budgets] == list(budgets)
+
+
+def test_a_task_train_does_not_run_is_titled_by_its_rows_command(baselines) -> None:
+    rows = [{"task": "serves", "config": "python scripts/one_decision.py --spin=-0.3,4,0.3"}]
+    assert baselines._title("serves", rows) == f"serves: {rows[0]['config']}"
+    assert baselines._title("serves") == "serves"
+    assert baselines._title("block").startswith("block: builtin:block-scratch")
